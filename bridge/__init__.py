@@ -1,0 +1,1 @@
+"""muvsim: bridge package."""

@@ -1,0 +1,1 @@
+"""muvsim: controllers package."""

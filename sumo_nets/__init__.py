@@ -1,0 +1,1 @@
+"""muvsim: sumo_nets package."""
