@@ -1,0 +1,46 @@
+"""Every numerical tolerance muvsim uses, in one place.
+
+All set operations, membership tests, QP feasibility checks and geometric
+collision tests read their tolerances from here, so that a change of policy
+is one edit and every test states which constant it relies on.
+"""
+
+#: Slack in a half-space test ``a @ x <= b + MEMBERSHIP_TOL`` for a point.
+#: Membership is decided on normalised rows (``|a| = 1``), so this is a
+#: distance in the state's units (m, m/s, ...).  Round-off in set synthesis
+#: is ~1e-12; 1e-9 keeps a margin of three decades.
+MEMBERSHIP_TOL = 1e-9
+
+#: Slack for set containment ``P <= Q`` decided through support functions.
+CONTAINMENT_TOL = 1e-7
+
+#: Two normalised half-spaces closer than this (in normal and offset) are
+#: the same facet when removing redundancy.
+FACET_MERGE_TOL = 1e-9
+
+#: A row ``a @ x <= b`` is redundant when its LP maximum is below
+#: ``b - REDUNDANCY_TOL``... is kept when it is tight within this slack.
+REDUNDANCY_TOL = 1e-9
+
+#: A polytope whose Chebyshev radius is below this is treated as empty or
+#: lower dimensional.
+EMPTY_RADIUS_TOL = 1e-9
+
+#: Constraint-violation tolerance accepted from a QP solver's answer
+#: (scaled rows).  daqp answers to ~1e-14; proxsuite to its eps_abs.
+QP_FEAS_TOL = 1e-7
+
+#: proxsuite absolute accuracy and primal-infeasibility threshold.
+PROXSUITE_EPS_ABS = 1e-9
+PROXSUITE_EPS_PRIMAL_INF = 1e-9
+
+#: Two solvers agree on an optimal input when they differ by less than this
+#: (m/s^2 or m/s^3).  Strictly convex 1-2 variable QPs: answers are unique.
+SOLVER_AGREEMENT_TOL = 1e-5
+
+#: Geometric separation below which two footprints count as touching (m).
+#: Positive separation is required by the paper; 1e-9 m absorbs round-off.
+GEOMETRY_TOL = 1e-9
+
+#: Slack used when verifying invariance / one-step properties by LP.
+VERIFY_TOL = 1e-7
