@@ -1,0 +1,106 @@
+"""Typed, validated settings for the controller components."""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Literal
+
+__all__ = ["SynthesisSettings", "ControllerSettings", "SettingsError", "default_cache_dir"]
+
+SOLVERS = ("exact", "daqp", "proxsuite")
+STRUCTURES = ("auto", "full")
+
+
+class SettingsError(ValueError):
+    """Invalid settings value; the message names the field and what is valid."""
+
+
+def default_cache_dir() -> Path:
+    """Where synthesised sets are cached: ``$MUVSIM_CACHE_DIR`` or ``~/.cache/muvsim``."""
+    env = os.environ.get("MUVSIM_CACHE_DIR")
+    return Path(env) if env else Path.home() / ".cache" / "muvsim"
+
+
+@dataclass(frozen=True)
+class SynthesisSettings:
+    """Offline synthesis (Off-1, Off-2) settings.
+
+    Parameters
+    ----------
+    q_weight, r_weight : float
+        LQR weights ``Q = q I``, ``R = r I`` of the terminal gain.
+    epsilon : float
+        Accuracy (m, m/s, ... in the infinity norm) of the Rakovic outer
+        approximation of the minimal RPI set used as ``T^0``.
+    max_levels : int
+        Bound on N; reaching it before condition (8) holds is an error.
+    terminal_method : {"auto", "zonotope", "maximal"}
+        How ``T^0`` is represented.  ``zonotope``: the Rakovic approximation
+        ``F(alpha, s)`` itself (2-D factors only: a zonotope with g generators
+        has 2g edges in 2-D but O(g^2) facets in 3-D).  ``maximal``: the maximal
+        RPI set inside the epsilon-enlarged bounding box of ``F(alpha, s)``;
+        it contains the minimal RPI set and has few facets in any dimension.
+        ``auto``: zonotope for 2-D factors, maximal otherwise.
+    structure : {"auto", "full"}
+        ``auto`` works on decoupled factors (products of low-dimensional sets);
+        ``full`` uses the general n-D path on the whole state.
+    cache : bool
+        Read and write the on-disk cache.
+    cache_dir : Path or None
+        Cache location (default :func:`default_cache_dir`).
+    """
+
+    q_weight: float = 1.0
+    r_weight: float = 1.0
+    epsilon: float = 0.05
+    max_levels: int = 200
+    terminal_method: Literal["auto", "zonotope", "maximal"] = "auto"
+    structure: Literal["auto", "full"] = "auto"
+    cache: bool = True
+    cache_dir: Path | None = None
+
+    def __post_init__(self) -> None:
+        for name in ("q_weight", "r_weight", "epsilon"):
+            v = getattr(self, name)
+            if not isinstance(v, (int, float)) or not v > 0:
+                raise SettingsError(f"SynthesisSettings.{name}: must be a number > 0, got {v!r}")
+        if not isinstance(self.max_levels, int) or self.max_levels < 1:
+            raise SettingsError(f"SynthesisSettings.max_levels: must be an integer >= 1, got {self.max_levels!r}")
+        if self.terminal_method not in ("auto", "zonotope", "maximal"):
+            raise SettingsError("SynthesisSettings.terminal_method: must be 'auto', 'zonotope' or "
+                                f"'maximal', got {self.terminal_method!r}")
+        if self.structure not in STRUCTURES:
+            raise SettingsError(f"SynthesisSettings.structure: must be one of {STRUCTURES}, got {self.structure!r}")
+
+    def key(self) -> str:
+        """The part of the cache key that depends on the settings."""
+        return f"q{self.q_weight:g}-r{self.r_weight:g}-e{self.epsilon:g}-L{self.max_levels}-" \
+               f"T{self.terminal_method}-{self.structure}"
+
+
+@dataclass(frozen=True)
+class ControllerSettings:
+    """Online ST-MPC settings.
+
+    Parameters
+    ----------
+    solver : {"exact", "daqp", "proxsuite"}
+        QP solver of eq. (6).  ``exact`` solves the QP in closed form per
+        decoupled factor with one input (the QP separates exactly there) and
+        falls back to ``daqp`` for factors with several inputs.
+    switching : {"terminal", "early"}
+        ``terminal`` asks to switch waypoint only from ``T^0`` (the paper);
+        ``early`` asks whenever the state lies in the next waypoint's domain.
+    """
+
+    solver: Literal["exact", "daqp", "proxsuite"] = "exact"
+    switching: Literal["terminal", "early"] = "early"
+
+    def __post_init__(self) -> None:
+        if self.solver not in SOLVERS:
+            raise SettingsError(f"ControllerSettings.solver: must be one of {SOLVERS}, got {self.solver!r}")
+        if self.switching not in ("terminal", "early"):
+            raise SettingsError(
+                f"ControllerSettings.switching: must be 'terminal' or 'early', got {self.switching!r}")
