@@ -86,6 +86,9 @@ class Polytope:
     b: np.ndarray
     _meta: dict = field(default_factory=dict, repr=False, compare=False)
 
+    #: Let ``M @ P`` with a numpy array ``M`` reach :meth:`__rmatmul__`.
+    __array_ufunc__ = None
+
     def __post_init__(self) -> None:
         A = np.atleast_2d(np.asarray(self.A, dtype=float))
         b = np.asarray(self.b, dtype=float).reshape(-1)
@@ -241,8 +244,11 @@ class Polytope:
         if not np.all(np.isfinite(V)):
             raise PolytopeError("unbounded polytope has no vertex list")
         V = np.unique(np.round(V, 12), axis=0)
-        if n >= 2 and len(V) > n:
-            V = V[ConvexHull(V).vertices]
+        if n >= 2 and len(V) > n + 1:
+            try:
+                V = V[ConvexHull(V).vertices]
+            except QhullError:  # degenerate clusters: keep the (valid, redundant) list
+                pass
         return V
 
     def minimal(self) -> "Polytope":

@@ -114,6 +114,25 @@ class SetFamily:
         """``T^l ⊖ D`` on the full state."""
         return _assemble(self, [f.tilde[l] for f in self.factors])
 
+    def vertices(self, l: int) -> np.ndarray:
+        """Vertices of ``T^l`` on the full state: the Cartesian product of factor vertices."""
+        V = np.zeros((1, self.model.n))
+        for f in self.factors:
+            Vf = f.levels[l].vertices
+            out = np.repeat(V, len(Vf), axis=0)
+            out[:, f.states] = np.tile(Vf, (len(V), 1))
+            V = out
+        return V
+
+    def sample(self, l: int, k: int, rng: np.random.Generator) -> np.ndarray:
+        """``k`` random points of ``T^l`` (random convex combinations per factor)."""
+        X = np.zeros((k, self.model.n))
+        for f in self.factors:
+            Vf = f.levels[l].vertices
+            W = rng.dirichlet(np.full(len(Vf), 0.3), size=k)
+            X[:, f.states] = W @ Vf
+        return X
+
     def facet_counts(self) -> list[int]:
         """Facets of ``T^0 .. T^N`` on the full state (sum over factors)."""
         return [sum(f.levels[l].n_facets for f in self.factors) for l in range(self.N + 1)]

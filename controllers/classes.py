@@ -1,0 +1,87 @@
+"""Built-in vehicle classes: a model, a footprint and a SUMO vClass.
+
+* ``paper-a`` .. ``paper-d``: the four classes of the paper's section IV
+  (double integrator, ``Ts = 0.1 s``, ``u_max = 4``), footprint of a car.
+* ``car``, ``bus``, ``truck``: urban classes for SUMO roads (13.89 m/s =
+  50 km/h), footprints equal to SUMO's default vTypes of the same vClass
+  (passenger 5 x 1.8 m, bus 12 x 2.5 m, truck 7.1 x 2.4 m).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from controllers.models import VehicleModel, double_integrator, drag_integrator
+
+__all__ = ["VehicleClass", "builtin_classes", "get_class", "ClassError"]
+
+
+class ClassError(KeyError):
+    """Unknown vehicle class."""
+
+    def __str__(self) -> str:  # KeyError quotes its message otherwise
+        return str(self.args[0])
+
+
+@dataclass(frozen=True)
+class VehicleClass:
+    """A vehicle class: dynamics and constraints plus a rectangular footprint.
+
+    Parameters
+    ----------
+    name : str
+    model : VehicleModel
+    length, width : float
+        Footprint (m), centred on the state's position.
+    vclass : str
+        SUMO vClass this class stands for.
+    """
+
+    name: str
+    model: VehicleModel
+    length: float
+    width: float
+    vclass: str
+
+    def __post_init__(self) -> None:
+        if not (self.length > 0 and self.width > 0):
+            raise ValueError(f"class {self.name!r}: length and width must be > 0 m, "
+                             f"got {self.length} x {self.width}")
+
+    @property
+    def v_max(self) -> float:
+        """Per-axis speed bound (m/s)."""
+        return float(self.model.z_bounds[1][0])
+
+
+def builtin_classes() -> dict[str, VehicleClass]:
+    """All built-in classes, freshly built (models are immutable values)."""
+    paper = {  # name: (v_max, d_max, delta)  -- paper section IV
+        "paper-a": (20.0, 0.06, 4.02),
+        "paper-b": (25.0, 0.085, 5.62),
+        "paper-c": (8.0, 0.07, 3.22),
+        "paper-d": (18.0, 0.065, 3.91),
+    }
+    out = {
+        name: VehicleClass(name, double_integrator(v_max=v, u_max=4.0, d_max=d, delta=dl, name=name),
+                           length=5.0, width=1.8, vclass="passenger")
+        for name, (v, d, dl) in paper.items()
+    }
+    out["car"] = VehicleClass(
+        "car", double_integrator(v_max=13.89, u_max=3.0, d_max=0.02, delta=3.0, name="car"),
+        length=5.0, width=1.8, vclass="passenger")
+    out["bus"] = VehicleClass(
+        "bus", drag_integrator(v_max=13.89, u_max=1.5, d_max=0.02, delta=3.0, tau=10.0, name="bus"),
+        length=12.0, width=2.5, vclass="bus")
+    out["truck"] = VehicleClass(
+        "truck", double_integrator(v_max=13.89, u_max=1.5, d_max=0.02, delta=3.0, name="truck"),
+        length=7.1, width=2.4, vclass="truck")
+    return out
+
+
+def get_class(name: str) -> VehicleClass:
+    """A built-in class by name; the error lists the valid names."""
+    classes = builtin_classes()
+    if name not in classes:
+        raise ClassError(f"unknown vehicle class {name!r}; valid classes: {', '.join(classes)}")
+    return classes[name]

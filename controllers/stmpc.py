@@ -1,0 +1,266 @@
+"""Online ST-MPC (paper steps On-1 and On-2), vectorised over the vehicles of a class.
+
+* :meth:`STMPC.index` -- the membership index of eq. (5) for many states at
+  once: one matrix product per decoupled factor over all stacked levels and a
+  segmented maximum (``np.maximum.reduceat``); the index is the largest of the
+  per-factor indices (the sets are products of nested factors).
+* :meth:`STMPC.control` -- the terminal law ``u = K (x - x_eq)`` at ``l = 0``,
+  otherwise the QP of eq. (6)
+
+      min_u |A x + B u - x_eq|^2  s.t.  A x + B u ∈ T~^{l-1}(r),  u ∈ U.
+
+  Because ``A x_eq = x_eq`` (Assumption 2) the QP is written in the error
+  ``e = x - x_eq``.  Solvers: ``exact`` (closed form per factor with one
+  input: the QP separates exactly over decoupled factors, and a strictly
+  convex 1-variable QP is a clipped unconstrained minimiser; vectorised over
+  vehicles), ``daqp`` and ``proxsuite`` (one QP per vehicle over all inputs).
+
+An infeasible QP inside the domain of attraction is a bug, never hidden:
+:class:`InfeasibleQPError` names the vehicles.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from controllers import tolerances as tol
+from controllers.settings import ControllerSettings
+from controllers.synthesis import SetFamily
+
+__all__ = ["STMPC", "InfeasibleQPError", "OutsideDomainError"]
+
+
+class InfeasibleQPError(RuntimeError):
+    """The QP of eq. (6) has no solution for a state inside the domain of attraction."""
+
+    def __init__(self, message: str, rows: np.ndarray):
+        super().__init__(message)
+        self.rows = rows
+
+
+class OutsideDomainError(RuntimeError):
+    """A state lies outside the controller's domain of attraction."""
+
+    def __init__(self, message: str, rows: np.ndarray):
+        super().__init__(message)
+        self.rows = rows
+
+
+@dataclass(frozen=True, eq=False)
+class _FactorTables:
+    states: np.ndarray
+    inputs: np.ndarray
+    A: np.ndarray
+    B: np.ndarray
+    K: np.ndarray
+    H: np.ndarray          # stacked rows of T^0..T^N
+    h: np.ndarray
+    starts: np.ndarray     # first row of each level
+    Ht: list               # per level: rows of T~^l
+    ht: list
+    HtB: list              # per level: T~^l rows times B
+    HtA: list              # per level: T~^l rows times A
+
+
+class STMPC:
+    """The ST-MPC of one vehicle class, applied to many vehicles at once.
+
+    Parameters
+    ----------
+    family : SetFamily
+        Output of :func:`controllers.synthesis.synthesize`.
+    settings : ControllerSettings, optional
+    """
+
+    def __init__(self, family: SetFamily, settings: ControllerSettings | None = None):
+        self.family = family
+        self.settings = settings or ControllerSettings()
+        self.model = family.model
+        self.N = family.N
+        self._tables = []
+        for f in family.factors:
+            H = np.vstack([P.A for P in f.levels])
+            h = np.concatenate([P.b for P in f.levels])
+            counts = [P.n_facets for P in f.levels]
+            starts = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.intp)
+            self._tables.append(_FactorTables(
+                states=f.states, inputs=f.inputs, A=f.A, B=f.B, K=f.K, H=H, h=h, starts=starts,
+                Ht=[P.A for P in f.tilde], ht=[P.b for P in f.tilde],
+                HtB=[P.A @ f.B for P in f.tilde], HtA=[P.A @ f.A for P in f.tilde]))
+        self._qp_cache: dict = {}
+        self._daqp = None
+
+    # ------------------------------------------------------------------ On-1
+    def index(self, X: np.ndarray, centres: np.ndarray) -> np.ndarray:
+        """Membership index ``l = min{l : x ∈ T^l(r)}`` of eq. (5) for each row.
+
+        Parameters
+        ----------
+        X : ndarray, shape (V, n)
+        centres : ndarray, shape (V, 2)
+            Waypoints ``r``; the sets are centred at ``x_eq = [r, 0]``.
+
+        Returns
+        -------
+        ndarray of int, shape (V,)
+            ``N + 1`` marks a state outside the domain of attraction.
+        """
+        E = np.asarray(X, dtype=float) - self.model.equilibrium(centres)
+        l = np.zeros(E.shape[0], dtype=np.intp)
+        for t in self._tables:
+            viol = E[:, t.states] @ t.H.T - t.h
+            worst = np.maximum.reduceat(viol, t.starts, axis=1)
+            inside = worst <= tol.MEMBERSHIP_TOL
+            lf = np.where(inside.any(axis=1), np.argmax(inside, axis=1), self.N + 1)
+            np.maximum(l, lf, out=l)
+        return l
+
+    def terminal_input(self, X: np.ndarray, centres: np.ndarray) -> np.ndarray:
+        """``u = K (x - x_eq)`` for each row."""
+        E = np.asarray(X, dtype=float) - self.model.equilibrium(centres)
+        return E @ self.family.K.T
+
+    # ------------------------------------------------------------------ On-2
+    def control(self, X: np.ndarray, centres: np.ndarray, l: np.ndarray,
+                ids: list | None = None) -> np.ndarray:
+        """Inputs for states ``X`` at indices ``l`` w.r.t. waypoints ``centres``.
+
+        Raises
+        ------
+        OutsideDomainError
+            If some ``l > N``.
+        InfeasibleQPError
+            If the QP is infeasible for a state in ``T^l`` (a bug, never hidden).
+        """
+        X = np.asarray(X, dtype=float)
+        l = np.asarray(l, dtype=np.intp)
+        if np.any(l > self.N):
+            rows = np.nonzero(l > self.N)[0]
+            raise OutsideDomainError(
+                f"{self.model.name}: vehicle(s) {_names(rows, ids)} outside the domain of attraction", rows)
+        E = X - self.model.equilibrium(centres)
+        U = E @ self.family.K.T
+        qp = np.nonzero(l > 0)[0]
+        if qp.size == 0:
+            return U
+        solver = self.settings.solver
+        if solver == "exact" and all(len(t.inputs) == 1 for t in self._tables):
+            U[qp] = self._solve_exact(E[qp], l[qp], qp, ids)
+        else:
+            U[qp] = self._solve_generic(E[qp], l[qp], qp, ids, "daqp" if solver == "exact" else solver)
+        return U
+
+    def _solve_exact(self, E, l, rows, ids):
+        U = np.empty((E.shape[0], self.model.m))
+        ulo, uhi = self.model.u_bounds
+        for t in self._tables:
+            k = int(t.inputs[0])
+            Ef = E[:, t.states]
+            b = t.B[:, 0]
+            AE = Ef @ t.A.T
+            u_free = -(AE @ b) / (b @ b)
+            lo = np.full(E.shape[0], ulo[k])
+            hi = np.full(E.shape[0], uhi[k])
+            bad = np.zeros(E.shape[0], dtype=bool)
+            for lev in np.unique(l):
+                sel = np.nonzero(l == lev)[0]
+                g = t.HtB[lev - 1][:, 0]
+                beta = t.ht[lev - 1][None, :] - AE[sel] @ t.Ht[lev - 1].T
+                pos, neg = g > tol.FACET_MERGE_TOL, g < -tol.FACET_MERGE_TOL
+                zero = ~(pos | neg)
+                if pos.any():
+                    hi[sel] = np.minimum(hi[sel], (beta[:, pos] / g[pos]).min(axis=1))
+                if neg.any():
+                    lo[sel] = np.maximum(lo[sel], (beta[:, neg] / g[neg]).max(axis=1))
+                if zero.any():
+                    bad[sel] |= (beta[:, zero] < -tol.QP_FEAS_TOL).any(axis=1)
+            bad |= lo > hi + tol.QP_FEAS_TOL
+            if bad.any():
+                r = rows[np.nonzero(bad)[0]]
+                raise InfeasibleQPError(
+                    f"{self.model.name}: QP (6) infeasible for vehicle(s) {_names(r, ids)} inside the "
+                    f"domain of attraction (factor states {t.states.tolist()})", r)
+            mid = np.where(lo > hi, 0.5 * (lo + hi), u_free)
+            U[:, k] = np.clip(mid, np.minimum(lo, hi), np.maximum(lo, hi))
+        return U
+
+    def _qp_data(self, e, lev):
+        """Dense QP data of eq. (6) on all inputs: 0.5 u'Hu + f'u, G u <= g."""
+        m = self.model.m
+        Hq = np.zeros((m, m))
+        f = np.zeros(m)
+        G_rows, g_rows = [], []
+        for t in self._tables:
+            ef = e[t.states]
+            Ae = t.A @ ef
+            Bf = t.B
+            Hq[np.ix_(t.inputs, t.inputs)] += Bf.T @ Bf
+            f[t.inputs] += Bf.T @ Ae
+            G = np.zeros((t.Ht[lev - 1].shape[0], m))
+            G[:, t.inputs] = t.HtB[lev - 1]
+            G_rows.append(G)
+            g_rows.append(t.ht[lev - 1] - t.HtA[lev - 1] @ ef)
+        return Hq, f, np.vstack(G_rows), np.concatenate(g_rows)
+
+    def _solve_generic(self, E, l, rows, ids, solver):
+        U = np.empty((E.shape[0], self.model.m))
+        ulo, uhi = self.model.u_bounds
+        for i in range(E.shape[0]):
+            Hq, f, G, g = self._qp_data(E[i], int(l[i]))
+            if solver == "daqp":
+                u, ok = _solve_daqp(Hq, f, G, g, ulo, uhi)
+            else:
+                u, ok = self._solve_proxsuite(Hq, f, G, g, ulo, uhi, int(l[i]))
+            if not ok or np.any(G @ u > g + tol.QP_FEAS_TOL * 10) or np.any(u < ulo - 1e-6) \
+                    or np.any(u > uhi + 1e-6):
+                r = rows[[i]]
+                raise InfeasibleQPError(
+                    f"{self.model.name}: QP (6) ({solver}) failed for vehicle {_names(r, ids)} inside "
+                    f"the domain of attraction", r)
+            U[i] = np.clip(u, ulo, uhi)
+        return U
+
+    def _solve_proxsuite(self, Hq, f, G, g, ulo, uhi, lev):
+        import proxsuite
+
+        # Normalise rows (proxsuite reports false infeasibility otherwise, design §5).
+        scale = np.linalg.norm(G, axis=1)
+        keep = scale > tol.FACET_MERGE_TOL
+        Gn = G[keep] / scale[keep, None]
+        gn = g[keep] / scale[keep]
+        key = (lev, Gn.shape[0])
+        qp = self._qp_cache.get(key)
+        lower = np.full(gn.shape, -1e20)
+        if qp is None:
+            qp = proxsuite.proxqp.dense.QP(Hq.shape[0], 0, Gn.shape[0], True)
+            qp.settings.eps_abs = tol.PROXSUITE_EPS_ABS
+            qp.settings.eps_primal_inf = tol.PROXSUITE_EPS_PRIMAL_INF
+            qp.settings.verbose = False
+            qp.init(Hq, f, None, None, Gn, lower, gn, ulo, uhi)
+            self._qp_cache[key] = qp
+        else:
+            qp.update(H=Hq, g=f, C=Gn, l=lower, u=gn, l_box=ulo, u_box=uhi)
+        qp.solve()
+        status = qp.results.info.status
+        ok = status == proxsuite.proxqp.QPSolverOutput.PROXQP_SOLVED
+        return np.array(qp.results.x), ok
+
+
+def _solve_daqp(Hq, f, G, g, ulo, uhi):
+    import daqp
+
+    m = Hq.shape[0]
+    bupper = np.concatenate([uhi, g])
+    blower = np.concatenate([ulo, np.full(g.shape, -1e30)])
+    sense = np.zeros(m + g.size, dtype=np.int32)
+    x, _, exitflag, _ = daqp.solve(np.ascontiguousarray(Hq), np.ascontiguousarray(f),
+                                   np.ascontiguousarray(G), bupper, blower, sense)
+    return np.asarray(x), exitflag == 1
+
+
+def _names(rows, ids) -> str:
+    if ids is None:
+        return ", ".join(f"#{int(r)}" for r in rows[:10])
+    return ", ".join(str(ids[int(r)]) for r in rows[:10])

@@ -1,0 +1,35 @@
+"""Shared, session-scoped set families (synthesis is the slow part of these tests)."""
+
+import numpy as np
+import pytest
+
+from controllers.classes import get_class
+from controllers.models import jerk_integrator
+from controllers.settings import SynthesisSettings
+from controllers.synthesis import synthesize
+
+JERK = dict(v_max=13.89, a_max=3.0, j_max=10.0, d_max=0.01, delta=2.0)
+
+
+@pytest.fixture(scope="session")
+def settings(tmp_path_factory):
+    return SynthesisSettings(cache_dir=tmp_path_factory.mktemp("sets-cache"))
+
+
+@pytest.fixture(scope="session")
+def families(settings):
+    """One family per model type: double integrator, drag, jerk."""
+    return {
+        "double": synthesize(get_class("paper-a").model, settings),
+        "drag": synthesize(get_class("bus").model, settings),
+        "jerk": synthesize(jerk_integrator(**JERK), settings),
+    }
+
+
+@pytest.fixture(params=["double", "drag", "jerk"])
+def family(request, families):
+    return families[request.param]
+
+
+def rng_for(seed: int) -> np.random.Generator:
+    return np.random.default_rng(seed)
