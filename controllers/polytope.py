@@ -56,8 +56,10 @@ def _dedupe(A: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Merge rows with the same normal (within tolerance), keeping the tightest."""
     if len(A) == 0:
         return A, b
-    scale = 1.0 / tol.FACET_MERGE_TOL ** 0.5
-    keys = np.round(A * scale).astype(np.int64)
+    # Only (numerically) identical hyperplanes are merged: qhull splits one facet into
+    # simplices whose normals agree to ~1e-12.  Merging merely similar normals would
+    # change the set.
+    keys = np.round(np.hstack([A, b[:, None]]) / tol.FACET_MERGE_TOL).astype(np.int64)
     _, inverse = np.unique(keys, axis=0, return_inverse=True)
     inverse = inverse.ravel()
     n_groups = inverse.max() + 1
@@ -129,7 +131,10 @@ class Polytope:
         if n == 1:
             return cls.from_box(V.min(axis=0), V.max(axis=0))
         try:
-            hull = ConvexHull(V)
+            try:
+                hull = ConvexHull(V)
+            except QhullError:
+                hull = ConvexHull(V, qhull_options="Qt Q12 Pp")
         except QhullError as exc:
             raise PolytopeError(f"points do not span {n} dimensions: {exc}") from None
         A = hull.equations[:, :-1]
@@ -239,8 +244,13 @@ class Polytope:
         hs = np.hstack([self.A, -self.b[:, None]])
         try:
             V = HalfspaceIntersection(hs, centre).intersections
-        except QhullError as exc:  # pragma: no cover - numerical failure
-            raise PolytopeError(f"vertex enumeration failed: {exc}") from None
+        except QhullError:
+            # Nearly coincident facets (qhull's triangulation of a facet in >= 3-D) can
+            # trip qhull's precision checks; allow wide merges and verify downstream.
+            try:
+                V = HalfspaceIntersection(hs, centre, qhull_options="Qbb Qc Qt Q12 Pp").intersections
+            except QhullError as exc:  # pragma: no cover - numerical failure
+                raise PolytopeError(f"vertex enumeration failed: {str(exc)[:200]}") from None
         if not np.all(np.isfinite(V)):
             raise PolytopeError("unbounded polytope has no vertex list")
         V = np.unique(np.round(V, 12), axis=0)

@@ -8,7 +8,7 @@ from controllers.models import jerk_integrator
 from controllers.settings import SynthesisSettings
 from controllers.synthesis import synthesize
 
-JERK = dict(v_max=13.89, a_max=3.0, j_max=10.0, d_max=0.01, delta=2.0)
+JERK = dict(v_max=13.89, a_max=4.0, j_max=40.0, d_max=0.01, delta=1.0)
 
 
 @pytest.fixture(scope="session")
