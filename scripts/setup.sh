@@ -1,0 +1,19 @@
+#!/usr/bin/env bash
+# Create .venv and install muvsim with its pinned dependencies (SUMO comes from PyPI).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+PY=${PYTHON:-python3}
+if ! "$PY" -c 'import sys, venv, ensurepip; assert sys.version_info >= (3, 11)' 2>/dev/null; then
+    # Debian/Ubuntu machines without venv support or an old Python: install it.
+    if command -v apt-get >/dev/null 2>&1; then
+        apt-get update -qq && apt-get install -y -qq python3 python3-venv python3-pip >/dev/null
+        PY=python3
+    fi
+fi
+# SUMO's binaries from the eclipse-sumo wheel link against these system libraries.
+if command -v apt-get >/dev/null 2>&1 && ! ldconfig -p 2>/dev/null | grep -q libxerces-c; then
+    : # the wheels ship their own libraries; nothing to install (checked on Debian 12)
+fi
+[ -x .venv/bin/python ] || "$PY" -m venv .venv
+.venv/bin/python -m pip install -q --upgrade pip
+.venv/bin/python -m pip install -q -e '.[test]'
