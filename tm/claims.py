@@ -1,0 +1,166 @@
+"""Claims (tubes) of vehicles and the conflict test between them.
+
+A claim is a family ``f``, a centre ``c`` (a waypoint), a set-membership
+index ``l``, a heading ``θ`` and a footprint ``(length, width)``.  Its
+footprint rectangle ``R(θ)`` is centred on the vehicle's state position.
+
+* ``union`` claim (paper's condition (9)): ``c + H^{max(l-1,0)} ⊕ R(θ)``,
+  with ``H`` the prefix hull of the family (``H^l = P^l`` when nested).
+* ``timed`` claim sequence (design 3d): ``c + P^{max(l-k,0)} ⊕ R(θ)`` for
+  ``k = 1, 2, ...``: where the vehicle's position can be at ``t + k``.
+
+Two claims conflict under ``union`` when their union polygons are closer
+than ``GEOMETRY_TOL``, under ``timed`` when their ``k``-th polygons are, for
+some ``k = 1 .. max(l_i, l_j, 1)``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from controllers.tolerances import GEOMETRY_TOL
+from tm.families import FamilyTable
+from tm.geometry import broad_phase, intersect_sat, minkowski_sum, rectangles
+
+__all__ = ["Claims", "claim_conflicts", "conflicting_pairs", "CHECK_KINDS"]
+
+CHECK_KINDS = ("union", "timed")
+
+
+@dataclass(frozen=True, eq=False)
+class Claims:
+    """A batch of ``n`` claims (arrays of length ``n``).
+
+    Parameters
+    ----------
+    table : FamilyTable
+    family : ndarray of int, shape (n,)
+    centre : ndarray, shape (n, 2)
+    index : ndarray of int, shape (n,)
+        ``0 <= index < table.n_levels[family]``.
+    heading, length, width : ndarray, shape (n,)
+    """
+
+    table: FamilyTable
+    family: np.ndarray
+    centre: np.ndarray
+    index: np.ndarray
+    heading: np.ndarray
+    length: np.ndarray
+    width: np.ndarray
+
+    def __post_init__(self) -> None:
+        n = len(self.family)
+        if self.centre.shape != (n, 2):
+            raise ValueError(f"Claims.centre: shape must be ({n}, 2), got {self.centre.shape}")
+        for name in ("index", "heading", "length", "width"):
+            if getattr(self, name).shape != (n,):
+                raise ValueError(f"Claims.{name}: shape must be ({n},), got {getattr(self, name).shape}")
+        if n and (self.index.min() < 0 or np.any(self.index >= self.table.n_levels[self.family])):
+            raise ValueError("Claims.index: must be in 0 .. N_f of the claim's family")
+
+    def __len__(self) -> int:
+        return len(self.family)
+
+    def take(self, idx) -> Claims:
+        """The claims at ``idx`` (int array or bool mask)."""
+        return Claims(self.table, self.family[idx], self.centre[idx], self.index[idx],
+                      self.heading[idx], self.length[idx], self.width[idx])
+
+    @staticmethod
+    def concat(first: Claims, *others: Claims) -> Claims:
+        """Claims of ``first`` followed by those of ``others`` (same family table)."""
+        parts = (first,) + others
+        if any(c.table is not first.table for c in others):
+            raise ValueError("Claims.concat: all claims must share one FamilyTable")
+        return Claims(first.table, *(np.concatenate([getattr(c, f) for c in parts])
+                                     for f in ("family", "centre", "index", "heading", "length", "width")))
+
+    def _half_extent(self) -> np.ndarray:
+        a, b = 0.5 * self.length, 0.5 * self.width
+        c, s = np.abs(np.cos(self.heading)), np.abs(np.sin(self.heading))
+        return np.stack([a * c + b * s, a * s + b * c], axis=1)
+
+    def aabb(self) -> tuple[np.ndarray, np.ndarray]:
+        """Bounding boxes ``(lo, hi)`` of the union claims; they contain every ``timed`` polygon too."""
+        rows = self.table.rows(self.family, np.maximum(self.index - 1, 0))
+        e = self._half_extent()
+        return self.centre + self.table.lo[rows] - e, self.centre + self.table.hi[rows] + e
+
+    def _polygons(self, stack: np.ndarray, level: np.ndarray, idx) -> np.ndarray:
+        sel = slice(None) if idx is None else idx
+        rows = self.table.rows(self.family[sel], level[sel])
+        rect = rectangles(self.heading[sel], self.length[sel], self.width[sel])
+        return minkowski_sum(stack[rows], rect) + self.centre[sel][:, None, :]
+
+    def polygons(self, idx=None) -> np.ndarray:
+        """Union claim polygons ``c + H^{max(l-1,0)} ⊕ R(θ)``, shape (n, K, 2)."""
+        return self._polygons(self.table.hulls, np.maximum(self.index - 1, 0), idx)
+
+    def polygons_at(self, k: int, idx=None) -> np.ndarray:
+        """``k``-th timed claim polygons ``c + P^{max(l-k,0)} ⊕ R(θ)``, shape (n, K, 2)."""
+        if k < 1:
+            raise ValueError(f"polygons_at: k must be >= 1, got {k}")
+        return self._polygons(self.table.levels, np.maximum(self.index - k, 0), idx)
+
+
+def claim_conflicts(claims: Claims, i, j, check: str = "union", tol: float = GEOMETRY_TOL) -> np.ndarray:
+    """Narrow phase: whether claims ``i[t]`` and ``j[t]`` conflict, for each pair ``t``.
+
+    Parameters
+    ----------
+    claims : Claims
+    i, j : ndarray of int, shape (p,)
+    check : {"union", "timed"}
+    tol : float
+        Touching within ``tol`` counts as a conflict.
+
+    Returns
+    -------
+    ndarray of bool, shape (p,)
+    """
+    i = np.asarray(i, dtype=np.intp)
+    j = np.asarray(j, dtype=np.intp)
+    p = len(i)
+    if check not in CHECK_KINDS:
+        raise ValueError(f"check: must be one of {CHECK_KINDS}, got {check!r}")
+    if p == 0:
+        return np.zeros(0, dtype=bool)
+    if check == "union":
+        uniq, inv = np.unique(np.concatenate([i, j]), return_inverse=True)
+        polys = claims.polygons(uniq)
+        return intersect_sat(polys[inv[:p]], polys[inv[p:]], tol)
+    out = np.zeros(p, dtype=bool)
+    kmax = np.maximum(np.maximum(claims.index[i], claims.index[j]), 1)
+    active = np.arange(p)
+    for k in range(1, int(kmax.max()) + 1):
+        active = active[kmax[active] >= k]
+        if len(active) == 0:
+            break
+        uniq, inv = np.unique(np.concatenate([i[active], j[active]]), return_inverse=True)
+        polys = claims.polygons_at(k, uniq)
+        n = len(active)
+        hit = intersect_sat(polys[inv[:n]], polys[inv[n:]], tol)
+        out[active[hit]] = True          # early exit: a conflicting pair is decided
+        active = active[~hit]
+    return out
+
+
+def conflicting_pairs(claims: Claims, check: str = "union", mask=None,
+                      tol: float = GEOMETRY_TOL) -> tuple[np.ndarray, np.ndarray]:
+    """All conflicting pairs ``i < j`` among ``claims`` (broad phase + narrow phase).
+
+    Parameters
+    ----------
+    claims : Claims
+    check : {"union", "timed"}
+    mask : array_like of bool, optional
+        Only pairs with at least one claim in ``mask``.
+    tol : float
+    """
+    lo, hi = claims.aabb()
+    i, j = broad_phase(lo, hi, tol, mask=mask)
+    hit = claim_conflicts(claims, i, j, check, tol)
+    return i[hit], j[hit]

@@ -1,0 +1,160 @@
+"""Go/Stop selection among requesters, given their conflicts (design 3b, 3c).
+
+Requesters are numbered ``0 .. n-1``; ``g_i = 1`` is Go.  Conflicts arrive
+as three arrays:
+
+* ``fixed_hits[i]``: how many non-requesters' claims ``new_i`` meets
+  (``> 0`` forces ``g_i = 0``);
+* ``leq`` rows ``(i, j)``: ``new_i`` meets ``old_j``, so ``g_i <= g_j``
+  (``i`` may not go into the hold region of a stopped ``j``);
+* ``excl`` rows ``(i, j)``: ``new_i`` meets ``new_j``, so ``g_i + g_j <= 1``.
+
+All-Stop satisfies every constraint, so every policy returns a feasible
+answer.  Ties are broken by the ``numpy.random.Generator`` passed in, so a
+seeded generator makes the decisions reproducible.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.optimize import Bounds, LinearConstraint, milp
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+
+__all__ = ["feasible", "select_greedy", "select_optimal", "propagate_stops"]
+
+
+def _edges(e) -> np.ndarray:
+    return np.asarray(e, dtype=np.intp).reshape(-1, 2)
+
+
+def feasible(go, fixed_hits, leq, excl) -> bool:
+    """Whether the Go mask ``go`` (n,) satisfies every constraint."""
+    go = np.asarray(go, dtype=bool)
+    leq, excl = _edges(leq), _edges(excl)
+    return bool(not np.any(go & (np.asarray(fixed_hits) > 0))
+                and not np.any(go[leq[:, 0]] & ~go[leq[:, 1]])
+                and not np.any(go[excl[:, 0]] & go[excl[:, 1]]))
+
+
+def select_greedy(n: int, fixed_hits, leq, excl, rng: np.random.Generator) -> np.ndarray:
+    """The paper's (P1)-(P3) extended to hold regions (design 3b).
+
+    With stop set ``S`` (initially empty), the active edges are the
+    conflicts of ``new_i`` (``i ∉ S``) with fixed claims, with ``new_j``
+    (``j ∉ S``) and with ``old_j`` (``j ∈ S``).  While an active edge exists,
+    the requester outside ``S`` with the highest active degree is stopped
+    (ties: uniformly at random from ``rng``).  Pass ``leq`` empty for the
+    paper's graph as written (hold regions ignored).
+
+    Returns
+    -------
+    ndarray of bool, shape (n,)
+        Go mask.
+    """
+    fixed_hits = np.asarray(fixed_hits, dtype=np.intp)
+    leq, excl = _edges(leq), _edges(excl)
+    stopped = np.zeros(n, dtype=bool)
+    while True:
+        ex = excl[~stopped[excl[:, 0]] & ~stopped[excl[:, 1]]]
+        lq = leq[~stopped[leq[:, 0]] & stopped[leq[:, 1]]]
+        deg = np.where(stopped, 0, fixed_hits) \
+            + np.bincount(ex.ravel(), minlength=n) + np.bincount(lq[:, 0], minlength=n)
+        best = deg.max() if n else 0
+        if best == 0:
+            return ~stopped
+        ties = np.flatnonzero(deg == best)
+        stopped[ties[rng.integers(len(ties))] if len(ties) > 1 else ties[0]] = True
+
+
+def propagate_stops(stopped, leq) -> np.ndarray:
+    """Close a stop mask under ``g_i <= g_j``: if ``j`` stops, ``i`` must stop."""
+    stopped = np.array(stopped, dtype=bool)
+    leq = _edges(leq)
+    while True:
+        add = stopped[leq[:, 1]] & ~stopped[leq[:, 0]]
+        if not add.any():
+            return stopped
+        stopped[leq[add, 0]] = True
+
+
+def _enumerate(n: int, leq: np.ndarray, excl: np.ndarray, w: np.ndarray) -> np.ndarray:
+    bits = ((np.arange(1 << n)[:, None] >> np.arange(n)) & 1).astype(bool)      # (2^n, n)
+    bad = np.any(bits[:, leq[:, 0]] & ~bits[:, leq[:, 1]], axis=1)
+    bad |= np.any(bits[:, excl[:, 0]] & bits[:, excl[:, 1]], axis=1)
+    score = np.where(bad, -np.inf, bits @ w)
+    return bits[int(np.argmax(score))]
+
+
+def _milp(n: int, leq: np.ndarray, excl: np.ndarray, w: np.ndarray, time_limit: float):
+    rows = np.arange(len(leq) + len(excl))
+    r = np.concatenate([rows, rows])
+    c = np.concatenate([leq[:, 0], excl[:, 0], leq[:, 1], excl[:, 1]])
+    v = np.concatenate([np.ones(len(leq) + len(excl)), -np.ones(len(leq)), np.ones(len(excl))])
+    A = coo_matrix((v, (r, c)), shape=(len(rows), n)).tocsr()
+    ub = np.concatenate([np.zeros(len(leq)), np.ones(len(excl))])
+    res = milp(-w, integrality=np.ones(n), bounds=Bounds(0, 1),
+               constraints=LinearConstraint(A, -np.inf, ub),
+               options={"time_limit": float(time_limit), "mip_rel_gap": 0.0})
+    return None if res.x is None else res.x > 0.5
+
+
+def select_optimal(n: int, fixed_hits, leq, excl, weights, rng: np.random.Generator,
+                   exhaustive_max: int = 14, milp_time_limit: float = 1.0) -> np.ndarray:
+    """Exact maximum-weight Go set.
+
+    Maximises ``Σ weights_i g_i`` subject to the constraints.  Forced stops
+    (``fixed_hits > 0``, closed under ``leq``) are fixed first; the rest
+    splits into connected components of the constraint graph, each solved
+    alone: exhaustive enumeration (vectorised) up to ``exhaustive_max``
+    requesters, ``scipy.optimize.milp`` (HiGHS, zero gap) above.
+
+    Parameters
+    ----------
+    weights : array_like of int, shape (n,)
+        Positive integer weights (the manager passes ``H + waited_i``).
+        Ties between optimal sets are broken at random by adding
+        ``u_i / (2 n)``, ``u_i ~ U[0, 1)``, which sums to less than 1 and so
+        never changes an integer optimum.
+    rng : numpy.random.Generator
+        Draws exactly ``n`` numbers per call.
+
+    Returns
+    -------
+    ndarray of bool, shape (n,)
+        Go mask.  If a MILP finds no feasible point within its time limit,
+        that component falls back to :func:`select_greedy` (still feasible).
+    """
+    fixed_hits = np.asarray(fixed_hits, dtype=np.intp)
+    leq, excl = _edges(leq), _edges(excl)
+    w = np.asarray(weights, dtype=float) + rng.random(n) / (2 * max(n, 1))
+    stopped = propagate_stops(fixed_hits > 0, leq)
+    go = ~stopped
+    leq = leq[go[leq[:, 0]] & go[leq[:, 1]]]
+    excl = excl[go[excl[:, 0]] & go[excl[:, 1]]]
+    edges = np.vstack([leq, excl])
+    if len(edges) == 0:
+        return go
+    ncomp, label = connected_components(
+        coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n)), directed=False)
+    sizes = np.bincount(label, minlength=ncomp)
+    comp_of_edge = label[edges[:, 0]]
+    order = np.argsort(comp_of_edge, kind="stable")
+    bounds = np.searchsorted(comp_of_edge[order], np.arange(ncomp + 1))
+    n_leq = len(leq)
+    for comp in np.flatnonzero(sizes > 1):
+        nodes = np.flatnonzero(label == comp)
+        local = np.full(n, -1, dtype=np.intp)
+        local[nodes] = np.arange(len(nodes))
+        ids = order[bounds[comp]:bounds[comp + 1]]
+        cl = local[edges[ids[ids < n_leq]]]
+        ce = local[edges[ids[ids >= n_leq]]]
+        cw = w[nodes]
+        if len(nodes) <= exhaustive_max:
+            sol = _enumerate(len(nodes), cl, ce, cw)
+        else:
+            sol = _milp(len(nodes), cl, ce, cw, milp_time_limit)
+            if sol is None or not feasible(sol, np.zeros(len(nodes)), cl, ce):
+                sol = select_greedy(len(nodes), np.zeros(len(nodes), dtype=np.intp), cl, ce, rng)
+        go[nodes] = sol
+    return go
