@@ -225,19 +225,24 @@ def _axes(Ac1: np.ndarray, Bc1: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return Ac, Bc
 
 
-def double_integrator(*, v_max: float, u_max: float, d_max: float, delta: float,
-                      Ts: float = 0.1, name: str = "double-integrator") -> VehicleModel:
-    """The paper's model: ``x = [p_x, p_y, v_x, v_y]``, ``u = [a_x, a_y]``.
-
-    ``|v| <= v_max``, ``|u| <= u_max`` per axis; ``|d_j| <= d_max`` on all four states.
-    """
-    Ac, Bc = _axes(np.array([[0.0, 1.0], [0.0, 0.0]]), np.array([[0.0], [1.0]]))
+def _second_order(name, lag, v_max, u_max, d_max, delta, Ts) -> VehicleModel:
+    """Per-axis ``p' = v, v' = lag v + a`` (``lag = 0``: double integrator), ZOH."""
+    Ac, Bc = _axes(np.array([[0.0, 1.0], [0.0, lag]]), np.array([[0.0], [1.0]]))
     A, B = _zoh(Ac, Bc, Ts)
     return VehicleModel(name=name, A=A, B=B,
                         z_bounds=(-np.full(2, v_max), np.full(2, v_max)),
                         u_bounds=(-np.full(2, u_max), np.full(2, u_max)),
                         d_bounds=(-np.full(4, d_max), np.full(4, d_max)),
                         delta=delta, Ts=Ts)
+
+
+def double_integrator(*, v_max: float, u_max: float, d_max: float, delta: float,
+                      Ts: float = 0.1, name: str = "double-integrator") -> VehicleModel:
+    """The paper's model: ``x = [p_x, p_y, v_x, v_y]``, ``u = [a_x, a_y]``.
+
+    ``|v| <= v_max``, ``|u| <= u_max`` per axis; ``|d_j| <= d_max`` on all four states.
+    """
+    return _second_order(name, 0.0, v_max, u_max, d_max, delta, Ts)
 
 
 def drag_integrator(*, v_max: float, u_max: float, d_max: float, delta: float,
@@ -245,13 +250,7 @@ def drag_integrator(*, v_max: float, u_max: float, d_max: float, delta: float,
     """Double integrator with first-order velocity lag: ``v' = -v/tau + a``."""
     if not (np.isfinite(tau) and tau > 0):
         raise ModelError(f"tau: the velocity time constant must be > 0 s, got {tau}")
-    Ac, Bc = _axes(np.array([[0.0, 1.0], [0.0, -1.0 / tau]]), np.array([[0.0], [1.0]]))
-    A, B = _zoh(Ac, Bc, Ts)
-    return VehicleModel(name=name, A=A, B=B,
-                        z_bounds=(-np.full(2, v_max), np.full(2, v_max)),
-                        u_bounds=(-np.full(2, u_max), np.full(2, u_max)),
-                        d_bounds=(-np.full(4, d_max), np.full(4, d_max)),
-                        delta=delta, Ts=Ts)
+    return _second_order(name, -1.0 / tau, v_max, u_max, d_max, delta, Ts)
 
 
 def jerk_integrator(*, v_max: float, a_max: float, j_max: float, d_max: float, delta: float,
