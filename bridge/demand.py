@@ -1,0 +1,271 @@
+"""The demand muvsim inserts itself: vehicles and vTypes read from SUMO route files.
+
+muvsim, not SUMO, decides when a vehicle enters the network (the traffic
+manager admits it once its initial tube is free, design.md 3f), so SUMO is
+never given the vehicles of a route file: :class:`~bridge.sumo_adapter.SumoAdapter`
+starts SUMO with the vTypes only (:meth:`Demand.vtypes_xml`) and adds each
+vehicle at admission.  This module reads route files into that plan:
+
+* ``<vType>``: id, vClass, length and width (SUMO's default for the vClass
+  where not given); the element itself is kept and handed to SUMO verbatim;
+* ``<route id=... edges=...>`` at top level, referenced by ``route="..."``;
+* ``<vehicle>`` with ``depart`` (seconds), ``type``, and either
+  ``route="id"`` or a nested ``<route edges=...>``; ``departLane`` as a lane
+  index (anything else -- ``best``, ``free``, ... -- lets the route choose the
+  lane), ``departPos`` in metres.
+
+``<trip>``, ``<flow>``, persons and distributions are refused with a clear
+error: route them into vehicles first (``duarouter``).
+"""
+
+from __future__ import annotations
+
+import bisect
+import math
+import os
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterable, Mapping, Sequence
+
+__all__ = ["DemandError", "VehicleType", "PlannedVehicle", "Demand", "DepartureQueue", "read_demand", "demand_from",
+           "VCLASS_DEFAULTS"]
+
+#: SUMO's default (length, width) per vClass (m), for vTypes that do not set them.
+VCLASS_DEFAULTS: Mapping[str, tuple[float, float]] = {
+    "passenger": (5.0, 1.8), "private": (5.0, 1.8), "taxi": (5.0, 1.8), "evehicle": (5.0, 1.8),
+    "bus": (12.0, 2.5), "coach": (14.0, 2.6), "truck": (7.1, 2.4), "trailer": (16.5, 2.55),
+    "delivery": (6.5, 2.16), "emergency": (6.5, 2.16), "authority": (5.0, 1.8), "army": (5.0, 1.8),
+    "motorcycle": (2.2, 0.9), "moped": (2.1, 0.8), "bicycle": (1.6, 0.65), "custom1": (5.0, 1.8),
+    "custom2": (5.0, 1.8),
+}
+_DEFAULT_VTYPE = "DEFAULT_VEHTYPE"
+_REFUSED = {"trip": "a <trip> (origin/destination only)", "flow": "a <flow>", "person": "a <person>",
+            "personFlow": "a <personFlow>", "container": "a <container>", "containerFlow": "a <containerFlow>",
+            "routeDistribution": "a <routeDistribution>", "vTypeDistribution": "a <vTypeDistribution>"}
+
+
+class DemandError(ValueError):
+    """A route file muvsim cannot use; the message names the file, the element and why."""
+
+
+@dataclass(frozen=True)
+class VehicleType:
+    """A SUMO vType.
+
+    Parameters
+    ----------
+    id : str
+    vclass : str
+    length, width : float
+        Footprint (m).
+    xml : str
+        The ``<vType>`` element as read (empty for SUMO's default type).
+    """
+
+    id: str
+    vclass: str
+    length: float
+    width: float
+    xml: str = ""
+
+
+@dataclass(frozen=True)
+class PlannedVehicle:
+    """A vehicle of the demand, before SUMO knows it.
+
+    Parameters
+    ----------
+    id : str
+    type_id : str
+        vType id.
+    depart_s : float
+        Planned departure (s).
+    edges : tuple of str
+        Its route.
+    depart_lane : int or None
+        Lane index to start on; None lets the route choose.
+    depart_pos_m : float or None
+        Start position along the first lane (m); None: its start.
+    vclass : str
+    length, width : float
+        Footprint (m), from its vType.
+    """
+
+    id: str
+    type_id: str
+    depart_s: float
+    edges: tuple[str, ...]
+    depart_lane: int | None
+    depart_pos_m: float | None
+    vclass: str
+    length: float
+    width: float
+
+
+@dataclass(frozen=True, eq=False)
+class Demand:
+    """All vehicles (sorted by planned departure, then file order) and their vTypes."""
+
+    vehicles: tuple[PlannedVehicle, ...]
+    types: Mapping[str, VehicleType]
+    files: tuple[Path, ...]
+
+    def __len__(self) -> int:
+        return len(self.vehicles)
+
+    def by_id(self) -> dict[str, PlannedVehicle]:
+        """Vehicles by id."""
+        return {v.id: v for v in self.vehicles}
+
+    def vtypes_xml(self) -> str:
+        """A route file holding only the vTypes (what SUMO is started with)."""
+        body = "\n".join("    " + t.xml for t in self.types.values() if t.xml)
+        return f'<?xml version="1.0" encoding="UTF-8"?>\n<routes>\n{body}\n</routes>\n'
+
+
+class DepartureQueue:
+    """Hands out the vehicles of a demand as their planned departure comes.
+
+    Parameters
+    ----------
+    demand : Demand
+    """
+
+    def __init__(self, demand: Demand) -> None:
+        self._vehicles = demand.vehicles
+        self._departs = [v.depart_s for v in demand.vehicles]
+        self._next = 0
+
+    def release(self, t: float, eps: float = 1e-6) -> list[PlannedVehicle]:
+        """Vehicles planned to depart at or before ``t`` not released yet, in order."""
+        end = bisect.bisect_right(self._departs, t + eps, lo=self._next)
+        out = list(self._vehicles[self._next:end])
+        self._next = end
+        return out
+
+    @property
+    def remaining(self) -> int:
+        """Vehicles not released yet."""
+        return len(self._vehicles) - self._next
+
+    @property
+    def next_depart_s(self) -> float | None:
+        """Planned departure of the next vehicle, or None when all are released."""
+        return self._departs[self._next] if self._next < len(self._departs) else None
+
+
+def _float(file: Path, elem: ET.Element, attr: str, default: float | None = None) -> float | None:
+    raw = elem.get(attr)
+    if raw is None:
+        return default
+    try:
+        v = float(raw)
+    except ValueError:
+        raise DemandError(f"{file}: <{elem.tag} id={elem.get('id')!r}> {attr}={raw!r}: must be a number "
+                          "(seconds or metres)") from None
+    if not math.isfinite(v):
+        raise DemandError(f"{file}: <{elem.tag} id={elem.get('id')!r}> {attr}={raw!r}: must be finite")
+    return v
+
+
+def _vtype(file: Path, elem: ET.Element) -> VehicleType:
+    vid = elem.get("id")
+    if not vid:
+        raise DemandError(f"{file}: <vType> without id")
+    vclass = elem.get("vClass", "passenger")
+    dl, dw = VCLASS_DEFAULTS.get(vclass, (None, None))
+    length = _float(file, elem, "length", dl)
+    width = _float(file, elem, "width", dw)
+    if length is None or width is None:
+        raise DemandError(f"{file}: <vType id={vid!r}> vClass {vclass!r}: set length and width explicitly "
+                          f"(muvsim knows SUMO's defaults for {', '.join(sorted(VCLASS_DEFAULTS))})")
+    if not (length > 0 and width > 0):
+        raise DemandError(f"{file}: <vType id={vid!r}>: length and width must be > 0, got {length} x {width}")
+    elem.tail = None
+    return VehicleType(vid, vclass, length, width, ET.tostring(elem, encoding="unicode").strip())
+
+
+def read_demand(route_files: str | os.PathLike | Sequence[str | os.PathLike]) -> Demand:
+    """Read route files into a :class:`Demand`.
+
+    Parameters
+    ----------
+    route_files : path or sequence of paths
+        SUMO route files (``.rou.xml``), read in order.
+
+    Raises
+    ------
+    DemandError
+        Unreadable or malformed file, refused element, unknown type or route,
+        duplicate vehicle id, non-numeric departure.
+    """
+    files = [Path(route_files)] if isinstance(route_files, (str, os.PathLike)) else [Path(f) for f in route_files]
+    types: dict[str, VehicleType] = {_DEFAULT_VTYPE: VehicleType(_DEFAULT_VTYPE, "passenger", 5.0, 1.8)}
+    routes: dict[str, tuple[str, ...]] = {}
+    raw: list[tuple[float, int, Path, ET.Element, tuple[str, ...]]] = []
+    seen: set[str] = set()
+    for file in files:
+        try:
+            root = ET.parse(file).getroot()
+        except OSError as exc:
+            raise DemandError(f"{file}: cannot read route file: {exc.strerror or exc}") from None
+        except ET.ParseError as exc:
+            raise DemandError(f"{file}: not a well-formed route file (XML): {exc}") from None
+        for elem in root:
+            tag = elem.tag
+            if tag == "vType":
+                t = _vtype(file, elem)
+                types[t.id] = t
+            elif tag == "route":
+                rid, edges = elem.get("id"), (elem.get("edges") or "").split()
+                if not rid or not edges:
+                    raise DemandError(f"{file}: top-level <route> needs an id and edges")
+                routes[rid] = tuple(edges)
+            elif tag == "vehicle":
+                vid = elem.get("id")
+                if not vid:
+                    raise DemandError(f"{file}: <vehicle> without id")
+                if vid in seen:
+                    raise DemandError(f"{file}: duplicate vehicle id {vid!r}")
+                seen.add(vid)
+                depart = _float(file, elem, "depart")
+                if depart is None:
+                    raise DemandError(f"{file}: <vehicle id={vid!r}> has no depart time")
+                nested = elem.find("route")
+                if nested is not None:
+                    edges = tuple((nested.get("edges") or "").split())
+                elif elem.get("route"):
+                    if elem.get("route") not in routes:
+                        raise DemandError(f"{file}: <vehicle id={vid!r}> references unknown route "
+                                          f"{elem.get('route')!r} (routes must be defined before use)")
+                    edges = routes[elem.get("route")]
+                else:
+                    raise DemandError(f"{file}: <vehicle id={vid!r}> has no route: muvsim needs explicit routes")
+                if not edges:
+                    raise DemandError(f"{file}: <vehicle id={vid!r}> has an empty route")
+                raw.append((depart, len(raw), file, elem, edges))
+            elif tag in _REFUSED:
+                raise DemandError(f"{file}: {_REFUSED[tag]} (id {elem.get('id')!r}) is not supported: muvsim needs "
+                                  "vehicles with explicit routes; convert with duarouter "
+                                  "(duarouter -n NET -r FILE -o routed.rou.xml) or randomTrips.py -r")
+            # other elements (e.g. <interval>, comments, <param>) carry no vehicles: ignored
+    vehicles = []
+    for depart, _, file, elem, edges in sorted(raw, key=lambda r: (r[0], r[1])):
+        tid = elem.get("type", _DEFAULT_VTYPE)
+        if tid not in types:
+            raise DemandError(f"{file}: <vehicle id={elem.get('id')!r}> has unknown type {tid!r}; "
+                              f"types: {', '.join(sorted(types))}")
+        t = types[tid]
+        lane_raw = elem.get("departLane")
+        lane = int(lane_raw) if lane_raw is not None and lane_raw.isdigit() else None
+        pos = _float(file, elem, "departPos") if (elem.get("departPos") or "").replace(".", "", 1).lstrip(
+            "-").isdigit() else None
+        vehicles.append(PlannedVehicle(elem.get("id"), tid, depart, edges, lane, pos, t.vclass, t.length, t.width))
+    return Demand(tuple(vehicles), types, tuple(files))
+
+
+def demand_from(vehicles: Iterable[PlannedVehicle], types: Mapping[str, VehicleType]) -> Demand:
+    """A :class:`Demand` built in code (tests, synthetic scenarios)."""
+    vs = sorted(vehicles, key=lambda v: v.depart_s)
+    return Demand(tuple(vs), dict(types), ())

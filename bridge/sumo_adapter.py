@@ -1,0 +1,546 @@
+"""The only code that talks to SUMO at run time (libsumo by default, traci optional).
+
+Who inserts vehicles.  muvsim's traffic manager admits a vehicle only when
+its initial tube is free (design.md 3f); until then the vehicle must not
+exist in SUMO, where it would be a physical obstacle that SUMO judges for
+collisions.  SUMO cannot be told to hold a vehicle of a route file back, and
+its own insertion would happen on its own terms.  So SUMO is started with the
+vTypes of the route files only, and muvsim inserts each vehicle itself at
+admission (:meth:`SumoAdapter.admit`): ``route.add`` + ``vehicle.add`` (depart
+"now", speed 0) + speed mode 0 and lane-change mode 0 + ``moveToXY``.  A
+vehicle moved by ``moveToXY`` before its first step is inserted at that
+position unconditionally (SUMO's insertion checks for gaps are bypassed), so
+an admission is never refused or delayed by SUMO; :meth:`SumoAdapter.step`
+checks that every vehicle admitted before it was inserted and raises
+otherwise.  Waiting vehicles live only in muvsim
+(:class:`~bridge.demand.DepartureQueue`), so a departure delay can never drop
+a vehicle.  The delay itself is muvsim's to measure: SUMO's tripinfo counts
+``depart`` from admission (``departDelay`` 0).
+
+SUMO options always set: ``--step-length`` (0.1 s), ``--collision.action
+warn --collision.check-junctions true --collision.mingap-factor 0`` (with the
+default action, teleport, moved vehicles report nothing), ``--no-step-log``,
+``--time-to-teleport -1`` (a vehicle stopped by the traffic manager for
+minutes must not be teleported away), and
+``--emergencydecel.warning-threshold`` high: the speeds SUMO infers from
+positions we set are not its drivers' decisions, its braking warnings would
+be noise.
+
+Positions.  SUMO places a vehicle by its FRONT BUMPER with an angle in
+degrees clockwise from north; see :mod:`bridge.pose` for conversions.
+Without the sublane model SUMO snaps a moved vehicle onto the centre line of
+its lane (measured: up to ~0.8 m on junction curves, the whole offset inside
+a lane change); ``lateral_resolution`` (e.g. 0.4 m) turns the sublane model
+on and SUMO then keeps the exact position, at about twice the step cost.
+
+Failures.  Every error SUMO raises (``TraCIException``,
+``FatalTraCIError``) becomes :class:`SumoError` with SUMO's message.  libsumo
+crashes the whole process on some malformed inputs (a broken network XML
+segfaults it), so :meth:`SumoAdapter.start` first checks that the inputs are
+well-formed XML and runs the same command once in a child ``sumo`` process
+(``preflight``, ~0.2 s) to get SUMO's own error message before loading
+anything in-process.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import tempfile
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterable, Sequence
+
+import numpy as np
+
+from bridge.demand import Demand, DemandError, PlannedVehicle, read_demand
+
+__all__ = ["SumoError", "CollisionEvent", "VehicleInfo", "SumoAdapter"]
+
+BACKENDS = ("libsumo", "traci")
+_REMOVE_ARRIVED = 2  # libsumo/traci constants.REMOVE_ARRIVED
+
+
+class SumoError(RuntimeError):
+    """SUMO failed to start or failed during the run; the message carries SUMO's own."""
+
+
+@dataclass(frozen=True)
+class CollisionEvent:
+    """A collision SUMO reported, once per contact (not once per step while it lasts).
+
+    Attributes
+    ----------
+    time_s : float
+        Simulation time of the step in which it began.
+    pair : tuple of str
+        The two vehicle ids, sorted.
+    collider, victim : str
+        SUMO's roles.
+    kind : str
+        SUMO's collision type (``collision``, ``frontal``, ``junction``, ...).
+    lane : str
+        Lane of the collision.
+    pos : float
+        Position on that lane (m).
+    """
+
+    time_s: float
+    pair: tuple[str, str]
+    collider: str
+    victim: str
+    kind: str
+    lane: str
+    pos: float
+
+
+@dataclass(frozen=True)
+class VehicleInfo:
+    """What SUMO says about a vehicle in the network."""
+
+    id: str
+    type_id: str
+    vclass: str
+    length: float
+    width: float
+    edges: tuple[str, ...]
+
+
+def _sumo_home() -> Path:
+    from sumo_nets.sumo_tools import sumo_home
+
+    return sumo_home()
+
+
+def _check_xml(kind: str, path: Path) -> None:
+    """Raise SumoError naming ``path`` unless it exists and is well-formed XML."""
+    if not path.is_file():
+        raise SumoError(f"SUMO {kind} {path} does not exist")
+    try:
+        for _ in ET.iterparse(path):
+            pass
+    except OSError as exc:
+        raise SumoError(f"SUMO {kind} {path} cannot be read: {exc.strerror or exc}") from None
+    except ET.ParseError as exc:
+        raise SumoError(f"SUMO {kind} {path} is not well-formed XML ({exc}); SUMO cannot load it") from None
+
+
+class SumoAdapter:
+    """One SUMO simulation, driven step by step.
+
+    Parameters
+    ----------
+    backend : {"libsumo", "traci"}
+        libsumo runs SUMO in this process (fast; ONE simulation per process);
+        traci talks to a ``sumo`` child process over a socket (~10x slower per
+        call, any number per process).
+
+    Examples
+    --------
+    >>> with SumoAdapter() as sim:                       # doctest: +SKIP
+    ...     demand = sim.start("run.sumocfg", tripinfo_path="tripinfo.xml")
+    ...     sim.admit(vehicle, front_xy, angle_deg)
+    ...     sim.step()
+    """
+
+    def __init__(self, backend: str = "libsumo") -> None:
+        if backend not in BACKENDS:
+            raise ValueError(f"backend: must be one of {', '.join(BACKENDS)}, got {backend!r}")
+        self.backend = backend
+        self._api = None  # libsumo module or a traci connection
+        self._exc: tuple[type[BaseException], ...] = ()
+        self._label = f"muvsim-{id(self)}"
+        self._tmp: Path | None = None
+        self.demand: Demand | None = None
+        self.command: list[str] = []
+        self._reset_run_state()
+
+    def _reset_run_state(self) -> None:
+        self._departed: tuple[str, ...] = ()
+        self._arrived: tuple[str, ...] = ()
+        self._admitted: set[str] = set()  # admitted since the last step: must depart in the next one
+        self._finished: list[str] = []  # finished since the last step
+        self._routes: set[str] = set()
+        self._active_pairs: set[tuple[str, str]] = set()
+        self._new_collisions: list[CollisionEvent] = []
+        self._collision_count = 0
+
+    # ------------------------------------------------------------------ lifecycle
+    @property
+    def running(self) -> bool:
+        """Whether a simulation is open."""
+        return self._api is not None
+
+    def _backend_module(self):
+        if self.backend == "libsumo":
+            import libsumo
+
+            return libsumo
+        import traci
+
+        return traci
+
+    def _errors(self, mod) -> tuple[type[BaseException], ...]:
+        if self.backend == "libsumo":
+            return (mod.TraCIException, mod.FatalTraCIError)
+        return (mod.exceptions.TraCIException, mod.exceptions.FatalTraCIError, ConnectionError, OSError)
+
+    def start(self, sumocfg: str | os.PathLike | None = None, *, net: str | os.PathLike | None = None,
+              routes: str | os.PathLike | Sequence[str | os.PathLike] | None = None, step_length: float = 0.1,
+              seed: int | None = None, gui: bool = False, tripinfo_path: str | os.PathLike | None = None,
+              extra_args: Iterable[str] = (), lateral_resolution: float | None = None,
+              work_dir: str | os.PathLike | None = None, preflight: bool = True) -> Demand:
+        """Start SUMO with a configuration, or a network and route files.
+
+        The vehicles of the route files are NOT given to SUMO (see the module
+        notes): they are returned as a :class:`~bridge.demand.Demand` for
+        muvsim to admit.
+
+        Parameters
+        ----------
+        sumocfg : path, optional
+            A ``.sumocfg``; its net-file and route-files are used (its other
+            settings too, except route-files and those set here).
+        net : path, optional
+            Network, when no ``sumocfg`` is given.
+        routes : path or sequence of paths, optional
+            Route files with the demand (vTypes and vehicles with routes).
+        step_length : float
+            Seconds per step.
+        seed : int, optional
+            SUMO's random seed.
+        gui : bool
+            Use ``sumo-gui``; needs a display (``$DISPLAY``).
+        tripinfo_path : path, optional
+            Where SUMO writes its tripinfo output.
+        extra_args : iterable of str
+            More SUMO options, appended last.
+        lateral_resolution : float, optional
+            Enable SUMO's sublane model (m); see the module notes.
+        work_dir : path, optional
+            Where the vTypes-only route file is written (default: a temporary
+            directory removed by :meth:`close`).
+        preflight : bool
+            Check the command in a child ``sumo`` first (see the module notes).
+
+        Returns
+        -------
+        Demand
+            The vehicles to admit, by planned departure.
+
+        Raises
+        ------
+        SumoError
+            Bad inputs, no display for the GUI, SUMO's refusal to start (with
+            its message), or libsumo already running a simulation here.
+        """
+        if self.running:
+            raise SumoError("this SumoAdapter already runs a simulation; close() it first")
+        if gui and not os.environ.get("DISPLAY"):
+            raise SumoError("gui=True needs a display but $DISPLAY is not set: run under a display "
+                            "(e.g. xvfb-run) or without the GUI")
+        if not (step_length > 0):
+            raise SumoError(f"step_length: must be > 0 s, got {step_length!r}")
+        from sumo_nets.scenario import ScenarioError, read_sumocfg
+
+        cfg_path = None
+        if sumocfg is not None:
+            try:
+                cfg = read_sumocfg(sumocfg)
+            except ScenarioError as exc:
+                raise SumoError(str(exc)) from None
+            cfg_path, net_path, route_paths = cfg.path, cfg.net, list(cfg.routes)
+            if routes is not None:
+                route_paths = [Path(routes)] if isinstance(routes, (str, os.PathLike)) else [Path(r) for r in routes]
+        else:
+            if net is None:
+                raise SumoError("start: give a sumocfg or a net (and route files)")
+            net_path = Path(net).resolve()
+            route_paths = [] if routes is None else (
+                [Path(routes)] if isinstance(routes, (str, os.PathLike)) else [Path(r) for r in routes])
+        _check_xml("network", Path(net_path))
+        for r in route_paths:
+            _check_xml("route file", Path(r))
+        try:
+            demand = read_demand(route_paths)
+        except DemandError as exc:
+            raise SumoError(f"cannot read the demand: {exc}") from None
+
+        if work_dir is None:
+            self._tmp = Path(tempfile.mkdtemp(prefix="muvsim-sumo-"))
+            wd = self._tmp
+        else:
+            wd = Path(work_dir)
+            wd.mkdir(parents=True, exist_ok=True)
+        vtypes = wd / "vtypes.rou.xml"
+        vtypes.write_text(demand.vtypes_xml(), encoding="utf-8")
+
+        home = _sumo_home()
+        exe = home / "bin" / ("sumo-gui" if gui else "sumo")
+        if not exe.is_file():
+            found = shutil.which(exe.name)
+            if not found:
+                self._cleanup_tmp()
+                raise SumoError(f"SUMO executable {exe.name!r} not found in {home / 'bin'} nor on PATH")
+            exe = Path(found)
+        args = (["-c", str(cfg_path)] if cfg_path is not None else ["-n", str(net_path)]) + [
+            "--route-files", str(vtypes),
+            "--step-length", f"{step_length:.10g}",
+            "--collision.action", "warn",
+            "--collision.check-junctions", "true",
+            "--collision.mingap-factor", "0",
+            "--no-step-log", "true",
+            "--time-to-teleport", "-1",
+            "--emergencydecel.warning-threshold", "1e9",
+        ]
+        if seed is not None:
+            args += ["--seed", str(int(seed))]
+        if lateral_resolution is not None:
+            args += ["--lateral-resolution", f"{float(lateral_resolution):.10g}"]
+        if gui:
+            args += ["--start", "true", "--quit-on-end", "true"]
+        extra = [str(a) for a in extra_args]
+        what = f"SUMO ({'configuration ' + str(cfg_path) if cfg_path else 'network ' + str(net_path)})"
+        if preflight:
+            self._preflight(home, args + extra, what)
+        out_args = ["--tripinfo-output", str(Path(tripinfo_path).resolve())] if tripinfo_path is not None else []
+        self.command = [str(exe), *args, *out_args, *extra]
+
+        mod = self._backend_module()
+        errors = self._errors(mod)
+        if self.backend == "libsumo":
+            try:  # a running in-process simulation answers; a fresh libsumo raises
+                mod.simulation.getTime()
+                busy = True
+            except errors:
+                busy = False
+            if busy:
+                self._cleanup_tmp()
+                raise SumoError("libsumo already runs a simulation in this process (one per process): close it "
+                                "first, or use backend='traci'")
+        try:
+            if self.backend == "libsumo":
+                mod.start(self.command)
+                self._api = mod
+            else:
+                mod.start(self.command, label=self._label)
+                self._api = mod.getConnection(self._label)
+        except errors as exc:
+            self._api = None
+            self._cleanup_tmp()
+            raise SumoError(f"{what} failed to start: {exc}") from None
+        self._exc = errors
+        self._reset_run_state()
+        self.demand = demand
+        return demand
+
+    def _preflight(self, home: Path, args: list[str], what: str) -> None:
+        exe = home / "bin" / "sumo"
+        exe = exe if exe.is_file() else Path(shutil.which("sumo") or "sumo")
+        try:
+            proc = subprocess.run([str(exe), *args, "--no-warnings", "true"], capture_output=True, text=True,
+                                  timeout=300, env={**os.environ, "SUMO_HOME": str(home)})
+        except (OSError, subprocess.TimeoutExpired) as exc:
+            self._cleanup_tmp()
+            raise SumoError(f"{what}: could not run the sumo check: {exc}") from None
+        if proc.returncode != 0:
+            self._cleanup_tmp()
+            msg = (proc.stderr.strip() or proc.stdout.strip())[-3000:]
+            if proc.returncode < 0:
+                msg = f"SUMO crashed (signal {-proc.returncode}) while loading its inputs. {msg}".strip()
+            raise SumoError(f"{what} failed to start: {msg or f'exit code {proc.returncode}'}")
+
+    def close(self) -> None:
+        """Close the simulation (flushing SUMO's outputs); safe to call twice or after a failure."""
+        api, self._api = self._api, None
+        if api is not None:
+            try:
+                api.close()
+            except Exception:  # a dead simulation cannot be closed more; outputs are what they are
+                pass
+        self._cleanup_tmp()
+
+    def _cleanup_tmp(self) -> None:
+        if self._tmp is not None:
+            shutil.rmtree(self._tmp, ignore_errors=True)
+            self._tmp = None
+
+    def __enter__(self) -> "SumoAdapter":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    # ------------------------------------------------------------------ calls
+    def _need(self, what: str):
+        if self._api is None:
+            raise SumoError(f"{what}: no simulation is running (start() first)")
+        return self._api
+
+    def _call(self, what: str, fn, *args):
+        try:
+            return fn(*args)
+        except self._exc as exc:
+            raise SumoError(f"SUMO failed in {what}: {exc}") from None
+
+    def sim_time(self) -> float:
+        """Current simulation time (s)."""
+        api = self._need("sim_time")
+        return float(self._call("simulation.getTime", api.simulation.getTime))
+
+    def step(self) -> None:
+        """Advance one step; collect departures, arrivals and collisions.
+
+        Raises
+        ------
+        SumoError
+            SUMO failed, or a vehicle admitted before this step was not inserted.
+        """
+        api = self._need("step")
+        self._call("simulationStep", api.simulationStep)
+        sim = api.simulation
+        self._departed = tuple(self._call("simulation.getDepartedIDList", sim.getDepartedIDList))
+        finished, self._finished = self._finished, []
+        during = self._call("simulation.getArrivedIDList", sim.getArrivedIDList)
+        seen = set(finished)
+        self._arrived = tuple(finished) + tuple(a for a in during if a not in seen)
+        if self._admitted:
+            missing = self._admitted.difference(self._departed)
+            self._admitted = set()
+            if missing:
+                raise SumoError(f"SUMO did not insert admitted vehicle(s) {sorted(missing)} "
+                                f"at t={self.sim_time():g}")
+        cols = self._call("simulation.getCollisions", sim.getCollisions)
+        if not cols and not self._active_pairs:
+            return
+        now = self.sim_time()
+        active: set[tuple[str, str]] = set()
+        for c in cols:
+            pair = tuple(sorted((c.collider, c.victim)))
+            if pair in active:
+                continue
+            active.add(pair)
+            if pair not in self._active_pairs:
+                self._new_collisions.append(CollisionEvent(now, pair, c.collider, c.victim, c.type, c.lane,
+                                                           float(c.pos)))
+                self._collision_count += 1
+        self._active_pairs = active
+
+    def departed_ids(self) -> tuple[str, ...]:
+        """Vehicles SUMO inserted in the last step (the ones admitted before it)."""
+        return self._departed
+
+    def arrived_ids(self) -> tuple[str, ...]:
+        """Vehicles that left the network with the last step: finished (removed) ones, then SUMO's own."""
+        return self._arrived
+
+    def vehicle_ids(self) -> tuple[str, ...]:
+        """Vehicles in the network now."""
+        api = self._need("vehicle_ids")
+        return tuple(self._call("vehicle.getIDList", api.vehicle.getIDList))
+
+    def collisions(self) -> list[CollisionEvent]:
+        """NEW collisions since the last call: one event per contact of an unordered pair.
+
+        SUMO repeats a collision every step while the bodies overlap; a pair
+        is reported again only after it was free for at least one step.
+        Collisions are collected by :meth:`step`, so none is lost when this
+        is called less often.
+        """
+        out, self._new_collisions = self._new_collisions, []
+        return out
+
+    @property
+    def collision_count(self) -> int:
+        """All collision events of the run so far."""
+        return self._collision_count
+
+    # ------------------------------------------------------------------ vehicles
+    def admit(self, vehicle: PlannedVehicle, xy_front: Sequence[float], angle_deg: float, *,
+              depart_lane: int | None = None) -> None:
+        """Insert a vehicle now at a pose; SUMO places it there at the next :meth:`step`.
+
+        Parameters
+        ----------
+        vehicle : PlannedVehicle
+            From the demand returned by :meth:`start`.
+        xy_front : (2,) float
+            Front-bumper position (m).
+        angle_deg : float
+            SUMO angle (deg, clockwise from north).
+        depart_lane : int, optional
+            Lane index on the first edge (e.g. ``RouteWaypoints.depart_lane_index``);
+            default the vehicle's own, else the first lane.
+        """
+        api = self._need("admit")
+        vid = vehicle.id
+        rid = f"{vid}!route"
+        if rid not in self._routes:
+            self._call(f"route.add({rid!r})", api.route.add, rid, list(vehicle.edges))
+            self._routes.add(rid)
+        lane = depart_lane if depart_lane is not None else vehicle.depart_lane
+        try:
+            api.vehicle.add(vid, rid, typeID=vehicle.type_id, depart="now",
+                            departLane=str(lane) if lane is not None else "first", departSpeed="0")
+        except self._exc as exc:
+            raise SumoError(f"SUMO refused to add vehicle {vid!r} (type {vehicle.type_id!r}, route "
+                            f"[{' '.join(vehicle.edges)}]): {exc}") from None
+        self.take_over(vid)
+        x, y = (float(v) for v in xy_front)
+        self._call(f"vehicle.moveToXY({vid!r})", api.vehicle.moveToXY, vid, "", -1, x, y, float(angle_deg), 1)
+        self._admitted.add(vid)
+
+    def take_over(self, vid: str) -> None:
+        """Disable SUMO's own driving of ``vid``: speed mode 0, lane-change mode 0."""
+        v = self._need("take_over").vehicle
+        self._call(f"vehicle.setSpeedMode({vid!r})", v.setSpeedMode, vid, 0)
+        self._call(f"vehicle.setLaneChangeMode({vid!r})", v.setLaneChangeMode, vid, 0)
+
+    def move(self, ids: Sequence[str], xy_front, angle_deg) -> None:
+        """Place vehicles for the next step: ``moveToXY(v, "", -1, x, y, angle, keepRoute=1)``.
+
+        Parameters
+        ----------
+        ids : sequence of str, length V
+        xy_front : array (V, 2)
+            Front-bumper positions (m).
+        angle_deg : array (V,)
+            SUMO angles (deg).
+        """
+        mv = self._need("move").vehicle.moveToXY
+        xy = np.asarray(xy_front, dtype=float).reshape(-1, 2).tolist()
+        ang = np.asarray(angle_deg, dtype=float).reshape(-1).tolist()
+        if not (len(ids) == len(xy) == len(ang)):
+            raise ValueError(f"move: {len(ids)} ids, {len(xy)} positions and {len(ang)} angles")
+        vid = None
+        try:
+            for vid, (x, y), a in zip(ids, xy, ang):
+                mv(vid, "", -1, x, y, a, 1)
+        except self._exc as exc:
+            raise SumoError(f"SUMO failed to move vehicle {vid!r}: {exc}") from None
+
+    def finish(self, vid: str) -> None:
+        """The vehicle reached the end of its route: remove it as ARRIVED (tripinfo records the arrival)."""
+        v = self._need("finish").vehicle
+        self._call(f"vehicle.remove({vid!r})", v.remove, vid, _REMOVE_ARRIVED)
+        self._finished.append(vid)
+
+    def pose(self, ids: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
+        """SUMO's front-bumper positions (V, 2) and angles (V,) of vehicles."""
+        v = self._need("pose").vehicle
+        xy = np.array([self._call("vehicle.getPosition", v.getPosition, i) for i in ids],
+                      dtype=float).reshape(-1, 2)
+        ang = np.array([self._call("vehicle.getAngle", v.getAngle, i) for i in ids], dtype=float)
+        return xy, ang
+
+    def vehicle_info(self, vid: str) -> VehicleInfo:
+        """Type, vClass, footprint and route of a vehicle in the network, as SUMO has them."""
+        v = self._need("vehicle_info").vehicle
+        c = self._call
+        return VehicleInfo(vid, c("vehicle.getTypeID", v.getTypeID, vid),
+                           c("vehicle.getVehicleClass", v.getVehicleClass, vid),
+                           float(c("vehicle.getLength", v.getLength, vid)),
+                           float(c("vehicle.getWidth", v.getWidth, vid)),
+                           tuple(c("vehicle.getRoute", v.getRoute, vid)))

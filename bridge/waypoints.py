@@ -1,0 +1,443 @@
+"""SUMO routes as polylines through lane shapes, subsampled into waypoints.
+
+A route (a list of edge ids) becomes a polyline that follows, for every edge,
+the centre line of one of its lanes, and between two edges the internal
+junction lanes of the connection the vehicle uses (``via`` lanes, possibly a
+chain of two for turns with an internal junction), read with
+``sumolib.net.readNet(net, withInternal=True)``.
+
+Lane choice.  On every edge but the last the vehicle must leave from a lane
+that has a connection to the next edge (right turns leave from lane 0, left
+turns from the leftmost lane in SUMO's grids); the connection fixes the lane
+it arrives on in the next edge.  The lanes are chosen for the whole route at
+once (dynamic programming) to need the fewest lane changes, ties going to the
+lower lane index.  Where the arrival lane differs from the lane the vehicle
+must leave from, the polyline changes lane along a straight diagonal in the
+middle of the edge (:data:`LANE_CHANGE_M` metres per lane, at most half the
+edge); the points of that diagonal lie between the two centre lines.
+
+Waypoints.  The polyline is cut at its corners (vertices where the direction
+turns by more than ``corner_deg``), and each piece between corners is divided
+into the fewest equal arc-length parts of length <= delta.  Waypoints are
+therefore ON the polyline (by construction, up to round-off) and consecutive
+waypoints are at most delta apart in Euclidean distance (a chord is never
+longer than its arc); sharp corners are waypoints themselves.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+__all__ = [
+    "RouteError",
+    "RouteWaypoints",
+    "NetGeometry",
+    "load_net",
+    "route_waypoints",
+    "subsample",
+    "point_polyline_distance",
+    "LANE_CHANGE_M",
+]
+
+#: Longitudinal length of a lane change, per lane crossed (m).
+LANE_CHANGE_M = 15.0
+
+_DUP_TOL = 1e-9  # consecutive polyline points closer than this are merged (m)
+
+
+class RouteError(ValueError):
+    """A route that cannot be drawn: unknown edge or no connection between consecutive edges."""
+
+
+@dataclass(frozen=True, eq=False)
+class RouteWaypoints:
+    """Waypoints of one route.
+
+    Attributes
+    ----------
+    vehicle_id : str or None
+        For messages.
+    edges : tuple of str
+        The route.
+    delta : float
+        Maximum distance between consecutive waypoints (m).
+    waypoints : ndarray, shape (K, 2)
+        Points on the polyline, first = start, last = end of the route.
+    arc_length : ndarray, shape (K,)
+        Cumulative arc length of each waypoint along the polyline (m), from 0.
+    lane_ids : tuple of str, length K
+        Lane (possibly internal, ``":..."``) each waypoint belongs to.
+    on_lane : ndarray of bool, shape (K,)
+        True where the waypoint lies on the centre line of ``lane_ids[k]``;
+        False inside a lane change (then ``lane_ids[k]`` is the target lane).
+    heading : ndarray, shape (K,)
+        Direction of travel at each waypoint (rad, mathematical: from +x, counter-clockwise).
+    length_m : float
+        Route length along the polyline (m).
+    polyline : ndarray, shape (P, 2)
+        The polyline itself.
+    segment_lanes : tuple of str, length P-1
+        Lane of each polyline segment.
+    segment_on_lane : ndarray of bool, shape (P-1,)
+        Whether each segment lies on its lane's centre line.
+    lanes : tuple of str
+        The lane used on each edge of the route (where the vehicle leaves it).
+    """
+
+    vehicle_id: str | None
+    edges: tuple[str, ...]
+    delta: float
+    waypoints: np.ndarray
+    arc_length: np.ndarray
+    lane_ids: tuple[str, ...]
+    on_lane: np.ndarray
+    heading: np.ndarray
+    length_m: float
+    polyline: np.ndarray
+    segment_lanes: tuple[str, ...]
+    segment_on_lane: np.ndarray
+    lanes: tuple[str, ...]
+
+    @property
+    def count(self) -> int:
+        """Number of waypoints K."""
+        return int(self.waypoints.shape[0])
+
+    @property
+    def depart_lane_index(self) -> int:
+        """Index of the lane the route starts on (for ``vehicle.add(departLane=...)``)."""
+        return int(self.segment_lanes[0].rsplit("_", 1)[1])
+
+
+# --------------------------------------------------------------------------- geometry helpers
+
+def _arc(points: np.ndarray) -> np.ndarray:
+    d = np.hypot(*np.diff(points, axis=0).T) if len(points) > 1 else np.zeros(0)
+    return np.concatenate([[0.0], np.cumsum(d)])
+
+
+def _at(points: np.ndarray, arc: np.ndarray, s: float) -> np.ndarray:
+    """Point at arc length ``s`` (clamped) of a polyline."""
+    s = min(max(s, 0.0), arc[-1])
+    i = int(np.clip(np.searchsorted(arc, s, side="right") - 1, 0, len(points) - 2))
+    seg = arc[i + 1] - arc[i]
+    t = 0.0 if seg <= 0 else (s - arc[i]) / seg
+    return points[i] + t * (points[i + 1] - points[i])
+
+
+def _cut(points: np.ndarray, s0: float, s1: float) -> np.ndarray:
+    """The part of a polyline between arc lengths ``s0 <= s1``."""
+    arc = _arc(points)
+    inner = points[(arc > s0) & (arc < s1)]
+    return np.vstack([_at(points, arc, s0), inner, _at(points, arc, s1)])
+
+
+def point_polyline_distance(p: np.ndarray, poly: np.ndarray) -> np.ndarray:
+    """Distance of points ``p`` (N,2) to a polyline ``poly`` (M,2), vectorised."""
+    p = np.atleast_2d(np.asarray(p, dtype=float))
+    a, b = poly[:-1], poly[1:]
+    ab = b - a
+    den = np.einsum("ij,ij->i", ab, ab)
+    den = np.where(den > 0, den, 1.0)
+    t = np.clip(np.einsum("nij,ij->ni", p[:, None, :] - a[None], ab) / den, 0.0, 1.0)
+    proj = a[None] + t[..., None] * ab[None]
+    return np.min(np.hypot(*(p[:, None, :] - proj).transpose(2, 0, 1)), axis=1)
+
+
+def subsample(polyline: np.ndarray, delta: float, corner_deg: float = 30.0) -> tuple[np.ndarray, np.ndarray]:
+    """Waypoints on ``polyline`` at most ``delta`` apart, corners kept.
+
+    Parameters
+    ----------
+    polyline : ndarray, shape (P, 2)
+        Without repeated points.
+    delta : float
+        Maximum Euclidean (and arc-length) distance between consecutive waypoints (m).
+    corner_deg : float
+        Vertices where the direction turns by more than this are waypoints.
+
+    Returns
+    -------
+    points : ndarray, shape (K, 2)
+    arc : ndarray, shape (K,)
+        Arc length of each waypoint along the polyline.
+    """
+    if not (delta > 0 and math.isfinite(delta)):
+        raise ValueError(f"delta: must be a finite number > 0 m, got {delta!r}")
+    poly = np.asarray(polyline, dtype=float)
+    arc = _arc(poly)
+    anchors = [0]
+    if len(poly) > 2:
+        d = np.diff(poly, axis=0)
+        ang = np.arctan2(d[:, 1], d[:, 0])
+        turn = np.abs((np.diff(ang) + np.pi) % (2 * np.pi) - np.pi)
+        anchors += [int(i) + 1 for i in np.nonzero(turn > math.radians(corner_deg))[0]]
+    anchors.append(len(poly) - 1)
+    s_out = [0.0]
+    for i0, i1 in zip(anchors[:-1], anchors[1:]):
+        a0, a1 = arc[i0], arc[i1]
+        n = max(1, math.ceil((a1 - a0) / delta - 1e-12))
+        s_out += list(a0 + (a1 - a0) * np.arange(1, n + 1) / n)
+    s = np.asarray(s_out)
+    s[-1] = arc[-1]
+    idx = np.clip(np.searchsorted(arc, s, side="right") - 1, 0, len(poly) - 2)
+    seg = arc[idx + 1] - arc[idx]
+    t = np.where(seg > 0, (s - arc[idx]) / np.where(seg > 0, seg, 1.0), 0.0)
+    pts = poly[idx] + t[:, None] * (poly[idx + 1] - poly[idx])
+    # anchors exactly on their vertex (no interpolation round-off at corners and ends)
+    for i in anchors:
+        k = int(np.argmin(np.abs(s - arc[i])))
+        if abs(s[k] - arc[i]) <= 1e-9 * max(1.0, arc[-1]):
+            pts[k] = poly[i]
+    return pts, s
+
+
+# --------------------------------------------------------------------------- the network
+
+@dataclass(frozen=True)
+class _Conn:
+    from_lane: int
+    to_lane: int
+    via: tuple[str, ...]  # internal lanes in order
+
+
+class NetGeometry:
+    """A SUMO network read once (with internal lanes), and the routes drawn on it.
+
+    Parameters
+    ----------
+    net_path : path
+        The ``.net.xml`` file.
+
+    Notes
+    -----
+    Use :func:`load_net` to share one instance per file.  Routes are memoised
+    per (edges, depart lane, vClass, delta, corner) in the instance.
+    """
+
+    def __init__(self, net_path: str | os.PathLike) -> None:
+        import sumolib  # only bridge/ talks to SUMO's libraries
+
+        self.path = Path(net_path).resolve()
+        if not self.path.is_file():
+            raise FileNotFoundError(f"SUMO network {self.path} does not exist")
+        self._net = sumolib.net.readNet(str(self.path), withInternal=True)
+        self._shapes: dict[str, np.ndarray] = {}
+        self._conns: dict[tuple[str, str, str | None], list[_Conn]] = {}
+        self._memo: dict[tuple, RouteWaypoints] = {}
+
+    # -- lanes and connections
+    def lane_shape(self, lane_id: str) -> np.ndarray:
+        """Centre line of a lane (P, 2), repeated points removed."""
+        shp = self._shapes.get(lane_id)
+        if shp is None:
+            raw = np.asarray(self._net.getLane(lane_id).getShape(), dtype=float)[:, :2]
+            keep = np.concatenate([[True], np.hypot(*np.diff(raw, axis=0).T) > _DUP_TOL])
+            shp = raw[keep]
+            shp.setflags(write=False)
+            self._shapes[lane_id] = shp
+        return shp
+
+    def has_edge(self, edge_id: str) -> bool:
+        """Whether the network has this (non-internal) edge."""
+        return self._net.hasEdge(edge_id)
+
+    def lane_count(self, edge_id: str) -> int:
+        """Number of lanes of an edge."""
+        return self._net.getEdge(edge_id).getLaneNumber()
+
+    def successors(self, edge_id: str) -> list[str]:
+        """Edges reachable from ``edge_id`` through one connection, sorted."""
+        return sorted(e.getID() for e in self._net.getEdge(edge_id).getOutgoing())
+
+    def connections(self, from_edge: str, to_edge: str, vclass: str | None = None) -> list[_Conn]:
+        """Lane connections from one edge to the next, with their chains of internal lanes."""
+        key = (from_edge, to_edge, vclass)
+        if key in self._conns:
+            return self._conns[key]
+        src, dst = self._net.getEdge(from_edge), self._net.getEdge(to_edge)
+        out = []
+        for c in src.getOutgoing().get(dst, []):
+            if vclass is not None and not (c.getFromLane().allows(vclass) and c.getToLane().allows(vclass)):
+                continue
+            via, lane_id = [], c.getViaLaneID()
+            while lane_id:
+                via.append(lane_id)
+                nxt = [cc for cc in self._net.getLane(lane_id).getOutgoing()
+                       if cc.getToLane().getEdge().getID() == to_edge]
+                lane_id = nxt[0].getViaLaneID() if nxt else ""
+                if len(via) > 8:  # a cycle would be a broken network
+                    raise RouteError(f"{self.path.name}: internal lanes of {from_edge} -> {to_edge} do not end")
+            out.append(_Conn(c.getFromLane().getIndex(), c.getToLane().getIndex(), tuple(via)))
+        out.sort(key=lambda c: (c.from_lane, c.to_lane))
+        self._conns[key] = out
+        return out
+
+    # -- routes
+    def _check_route(self, edges: Sequence[str], who: str, vclass: str | None) -> list[list[_Conn]]:
+        if len(edges) == 0:
+            raise RouteError(f"{who}: empty route")
+        for e in edges:
+            if not self._net.hasEdge(e) or self._net.getEdge(e).getFunction() == "internal":
+                raise RouteError(f"{who}: edge {e!r} of route [{' '.join(edges)}] is not in {self.path.name}")
+        conns = []
+        for a, b in zip(edges[:-1], edges[1:]):
+            cs = self.connections(a, b, vclass)
+            if not cs:
+                extra = f" for vClass {vclass!r}" if vclass else ""
+                raise RouteError(f"{who}: route [{' '.join(edges)}] is unreachable: no connection from edge "
+                                 f"{a!r} to edge {b!r}{extra} in {self.path.name}")
+            conns.append(cs)
+        return conns
+
+    def _choose(self, edges: Sequence[str], conns: list[list[_Conn]], depart_lane: int | None
+                ) -> tuple[int, list[_Conn]]:
+        """Fewest lane changes over the route: (arrival lane on the first edge, connection per junction)."""
+        m = len(edges)
+        n_last = self.lane_count(edges[-1])
+        best = [dict.fromkeys(range(n_last), 0)]  # best[k][a]: cost from edge k on, arriving on lane a
+        choice: list[dict[int, _Conn]] = []
+        for k in range(m - 2, -1, -1):
+            nxt = best[0]
+            cost_k, choice_k = {}, {}
+            for a in range(self.lane_count(edges[k])):
+                cands = sorted(conns[k], key=lambda c: (abs(a - c.from_lane) + nxt[c.to_lane],
+                                                        abs(a - c.from_lane), c.from_lane, c.to_lane))
+                cost_k[a] = abs(a - cands[0].from_lane) + nxt[cands[0].to_lane]
+                choice_k[a] = cands[0]
+            best.insert(0, cost_k)
+            choice.insert(0, choice_k)
+        if depart_lane is None:
+            # free start: the lane of the cheapest first connection (no change needed on edge 0)
+            if m == 1:
+                a0 = 0
+            else:
+                a0 = min(conns[0], key=lambda c: (best[1][c.to_lane], c.from_lane, c.to_lane)).from_lane
+        else:
+            a0 = depart_lane
+        path, a = [], a0
+        for k in range(m - 1):
+            c = choice[k][a]
+            path.append(c)
+            a = c.to_lane
+        return a0, path
+
+    def route(self, edges: Sequence[str], delta: float, *, depart_lane: int | None = None,
+              vclass: str | None = None, vehicle_id: str | None = None, corner_deg: float = 30.0
+              ) -> RouteWaypoints:
+        """Polyline and waypoints of a route; see the module notes.
+
+        Parameters
+        ----------
+        edges : sequence of str
+            Edge ids, consecutive ones connected.
+        delta : float
+            Maximum waypoint spacing (m).
+        depart_lane : int, optional
+            Lane the vehicle starts on; None lets the route choose.
+        vclass : str, optional
+            Use only lanes this SUMO vClass may use.
+        vehicle_id : str, optional
+            For error messages.
+        corner_deg : float
+            See :func:`subsample`.
+
+        Raises
+        ------
+        RouteError
+            Unknown edge, or consecutive edges without a connection (naming the
+            vehicle and both edges), or a depart lane the first edge lacks.
+        """
+        edges = tuple(edges)
+        key = (edges, depart_lane, vclass, float(delta), float(corner_deg))
+        if key in self._memo:
+            hit = self._memo[key]
+            if hit.vehicle_id == vehicle_id:
+                return hit
+            return RouteWaypoints(**{**hit.__dict__, "vehicle_id": vehicle_id})
+        who = f"vehicle {vehicle_id!r}" if vehicle_id is not None else "route"
+        conns = self._check_route(edges, who, vclass)
+        if depart_lane is not None and not 0 <= depart_lane < self.lane_count(edges[0]):
+            raise RouteError(f"{who}: depart lane {depart_lane} does not exist on edge {edges[0]!r} "
+                             f"(lanes 0..{self.lane_count(edges[0]) - 1})")
+        arrive, path = self._choose(edges, conns, depart_lane)
+
+        pieces: list[tuple[np.ndarray, str, bool]] = []  # (points, lane id, on its centre line)
+        lanes_used = []
+        for k, e in enumerate(edges):
+            leave = path[k].from_lane if k < len(path) else arrive
+            lane_in, lane_out = f"{e}_{arrive}", f"{e}_{leave}"
+            lanes_used.append(lane_out)
+            if leave == arrive:
+                pieces.append((self.lane_shape(lane_in), lane_in, True))
+            else:
+                s_in, s_out = self.lane_shape(lane_in), self.lane_shape(lane_out)
+                length = min(_arc(s_in)[-1], _arc(s_out)[-1])
+                lc = min(LANE_CHANGE_M * abs(leave - arrive), 0.5 * length)
+                s_a = 0.5 * (length - lc)
+                pieces.append((_cut(s_in, 0.0, s_a), lane_in, True))
+                pieces.append((_cut(s_out, s_a + lc, _arc(s_out)[-1]), lane_out, True))
+            if k < len(path):
+                for via in path[k].via:
+                    pieces.append((self.lane_shape(via), via, True))
+                arrive = path[k].to_lane
+
+        pts, seg_lane, seg_on = [pieces[0][0][0]], [], []
+        for shape, lane, on in pieces:
+            for j, q in enumerate(shape):
+                if np.hypot(*(q - pts[-1])) <= _DUP_TOL:
+                    continue
+                pts.append(q)
+                seg_lane.append(lane)
+                # j == 0: a segment joining the previous piece to this one (the diagonal of a lane
+                # change, or a gap in the network's geometry): on no centre line
+                seg_on.append(on and j > 0)
+        poly = np.asarray(pts, dtype=float)
+        if len(poly) < 2:
+            raise RouteError(f"{who}: route [{' '.join(edges)}] has zero length")
+        wps, arc = subsample(poly, delta, corner_deg)
+        parc = _arc(poly)
+        seg = np.clip(np.searchsorted(parc, arc, side="right") - 1, 0, len(poly) - 2)
+        d = np.diff(poly, axis=0)
+        seg_heading = np.arctan2(d[:, 1], d[:, 0])
+        seg_on_arr = np.asarray(seg_on, dtype=bool)
+        out = RouteWaypoints(
+            vehicle_id=vehicle_id, edges=edges, delta=float(delta), waypoints=wps, arc_length=arc,
+            lane_ids=tuple(seg_lane[i] for i in seg), on_lane=seg_on_arr[seg], heading=seg_heading[seg],
+            length_m=float(parc[-1]), polyline=poly, segment_lanes=tuple(seg_lane),
+            segment_on_lane=seg_on_arr, lanes=tuple(lanes_used))
+        for a in (wps, arc, out.on_lane, out.heading, poly, seg_on_arr):
+            a.setflags(write=False)
+        self._memo[key] = out
+        return out
+
+
+@functools.lru_cache(maxsize=8)
+def _load_net_cached(path: str, mtime_ns: int, size: int) -> NetGeometry:
+    return NetGeometry(path)
+
+
+def load_net(net_path: str | os.PathLike) -> NetGeometry:
+    """A :class:`NetGeometry` shared per file (re-read when the file changes)."""
+    p = Path(net_path).resolve()
+    try:
+        st = p.stat()
+    except OSError as exc:
+        raise FileNotFoundError(f"SUMO network {p} cannot be read: {exc.strerror or exc}") from None
+    return _load_net_cached(str(p), st.st_mtime_ns, st.st_size)
+
+
+def route_waypoints(net: str | os.PathLike | NetGeometry, edges: Sequence[str], delta: float, *,
+                    depart_lane: int | None = None, vclass: str | None = None, vehicle_id: str | None = None,
+                    corner_deg: float = 30.0) -> RouteWaypoints:
+    """Waypoints of a route on a network file or :class:`NetGeometry`; see :meth:`NetGeometry.route`."""
+    geom = net if isinstance(net, NetGeometry) else load_net(net)
+    return geom.route(edges, delta, depart_lane=depart_lane, vclass=vclass, vehicle_id=vehicle_id,
+                      corner_deg=corner_deg)
