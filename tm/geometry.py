@@ -130,11 +130,12 @@ def edge_normals(P) -> np.ndarray:
 def is_convex_ccw(P, tol: float = GEOMETRY_TOL) -> bool:
     """Whether a single polygon ``(k, 2)`` is convex, counter-clockwise and winds once.
 
-    Zero-length edges are ignored; points and segments (zero area) are accepted.
+    Edges shorter than ``tol`` (repeated vertices, round-off) are ignored;
+    points and segments (zero area) are accepted.
     """
     P = np.asarray(P, dtype=float)
     E = _edges(P)
-    E = E[np.linalg.norm(E, axis=1) > 0]
+    E = E[np.linalg.norm(E, axis=1) > tol]
     if len(E) < 3:
         return True
     E1 = np.roll(E, -1, axis=0)
@@ -363,15 +364,16 @@ def min_pair_distance(P) -> tuple[float, int, int]:
 
 
 # ----------------------------------------------------------------------------- LP (the paper's method)
-def halfspaces(P) -> tuple[np.ndarray, np.ndarray]:
+def halfspaces(P, tol: float = GEOMETRY_TOL) -> tuple[np.ndarray, np.ndarray]:
     """H-representation ``A x <= b`` (unit rows) of one CCW convex polygon ``(k, 2)``.
 
-    The rows are the edge normals plus the four bounding-box rows (redundant
-    for full-dimensional polygons; they close segments and points).
+    The rows are the normals of the edges longer than ``tol`` (a shorter
+    edge's direction is round-off) plus the four bounding-box rows
+    (redundant for full-dimensional polygons; they close segments and points).
     """
     P = np.asarray(P, dtype=float)
     N = edge_normals(P)
-    keep = np.linalg.norm(N, axis=1) > 0
+    keep = np.linalg.norm(_edges(P), axis=1) > tol
     A = np.vstack([N[keep], np.eye(2), -np.eye(2)])
     lo, hi = P.min(axis=0), P.max(axis=0)
     b = np.concatenate([np.einsum("ij,ij->i", N[keep], P[keep]), hi, -lo])

@@ -1,0 +1,88 @@
+"""Go/Stop selection: feasibility, exact optimality vs brute force, optimal vs greedy."""
+
+import itertools
+
+import numpy as np
+from hypothesis import given, settings, strategies as st
+
+from tm.selection import propagate_stops, select_greedy, select_optimal
+
+
+@st.composite
+def instances(draw, max_n=10):
+    """Random requester constraint sets: fixed hits, g_i <= g_j rows and exclusion rows."""
+    n = draw(st.integers(1, max_n))
+    rng = np.random.default_rng(draw(st.integers(0, 2**32 - 1)))
+    fixed_hits = (rng.random(n) < draw(st.floats(0, 0.4))) * rng.integers(1, 3, n)
+    pairs = np.array([(i, j) for i in range(n) for j in range(n) if i != j], dtype=int).reshape(-1, 2)
+    leq = pairs[rng.random(len(pairs)) < draw(st.floats(0, 0.3))]
+    excl = pairs[(pairs[:, 0] < pairs[:, 1]) & (rng.random(len(pairs)) < draw(st.floats(0, 0.5)))]
+    weights = rng.integers(50, 60, n) if draw(st.booleans()) else np.full(n, 50)
+    return n, fixed_hits, leq, excl, weights
+
+
+def ok(go, fixed_hits, leq, excl):
+    """Independent constraint check (plain Python)."""
+    return (all(not (g and h > 0) for g, h in zip(go, fixed_hits))
+            and all(not (go[i] and not go[j]) for i, j in leq)
+            and all(not (go[i] and go[j]) for i, j in excl))
+
+
+def brute_best(n, fixed_hits, leq, excl, weights):
+    return max(sum(w for g, w in zip(go, weights) if g)
+               for go in itertools.product([False, True], repeat=n) if ok(go, fixed_hits, leq, excl))
+
+
+@settings(max_examples=150, deadline=None)
+@given(instances(), st.integers(0, 100))
+def test_optimal_is_optimal_and_greedy_is_feasible(inst, seed):
+    n, fixed_hits, leq, excl, weights = inst
+    best = brute_best(*inst)
+    for exhaustive_max in (14, 1):                              # 1: every component goes to the MILP
+        go = select_optimal(n, fixed_hits, leq, excl, weights, np.random.default_rng(seed), exhaustive_max)
+        assert ok(go, fixed_hits, leq, excl)
+        assert weights[go].sum() == best
+    greedy = select_greedy(n, fixed_hits, leq, excl, np.random.default_rng(seed))
+    assert ok(greedy, fixed_hits, leq, excl)
+
+
+@settings(max_examples=150, deadline=None)
+@given(instances(max_n=25), st.integers(0, 100))
+def test_optimal_never_stops_more_than_greedy_with_equal_weights(inst, seed):
+    n, fixed_hits, leq, excl, _ = inst
+    w = np.ones(n, dtype=int)
+    opt = select_optimal(n, fixed_hits, leq, excl, w, np.random.default_rng(seed))
+    greedy = select_greedy(n, fixed_hits, leq, excl, np.random.default_rng(seed))
+    assert ok(opt, fixed_hits, leq, excl) and ok(greedy, fixed_hits, leq, excl)
+    assert (~opt).sum() <= (~greedy).sum()
+
+
+def test_greedy_can_be_strictly_worse():
+    """Path 0-1-2-3-4 of exclusions: degrees 1, 2, 2, 2, 1.  Greedy breaks the tie at random:
+    stopping 1 (or 3) first ends with 2 stops, stopping 2 first with 3.  Optimal: always 2."""
+    excl = np.array([[0, 1], [1, 2], [2, 3], [3, 4]])
+    stops = {int((~select_greedy(5, np.zeros(5, int), np.zeros((0, 2), int), excl,
+                                  np.random.default_rng(s))).sum()) for s in range(40)}
+    assert stops == {2, 3}
+    opt = select_optimal(5, np.zeros(5, int), np.zeros((0, 2), int), excl, np.ones(5, int),
+                         np.random.default_rng(0))
+    assert (~opt).sum() == 2
+
+
+def test_forced_stops_propagate_through_hold_regions():
+    # 0 hits a fixed claim; 1 wants into 0's hold region; 2 into 1's; 3 is free
+    leq = np.array([[1, 0], [2, 1]])
+    assert propagate_stops([True, False, False, False], leq).tolist() == [True, True, True, False]
+    go = select_optimal(4, [1, 0, 0, 0], leq, np.zeros((0, 2), int), np.ones(4, int), np.random.default_rng(0))
+    assert go.tolist() == [False, False, False, True]
+
+
+def test_same_rng_seed_same_tie_breaks():
+    excl = np.array([[i, j] for i in range(6) for j in range(i + 1, 6)])    # a clique: one goes
+    runs = [select_optimal(6, np.zeros(6, int), np.zeros((0, 2), int), excl, np.ones(6, int),
+                           np.random.default_rng(7)) for _ in range(2)]
+    assert np.array_equal(*runs) and runs[0].sum() == 1
+    winners = {int(np.flatnonzero(select_optimal(6, np.zeros(6, int), np.zeros((0, 2), int), excl,
+                                                 np.ones(6, int), np.random.default_rng(s)))[0])
+               for s in range(30)}
+    assert len(winners) > 1                                       # ties are not always won by 0
