@@ -113,6 +113,12 @@ def _check_choice(source, fld, v, choices):
     return v
 
 
+def _floats(obj, *names: str) -> None:
+    """Store validated numbers of a frozen dataclass as floats (TOML ``100`` is an int)."""
+    for n in names:
+        object.__setattr__(obj, n, float(getattr(obj, n)))
+
+
 # --------------------------------------------------------------------------- specs
 
 @dataclass(frozen=True)
@@ -149,6 +155,7 @@ class NetSpec:
         _check_number(s, "net.spacing_m", self.spacing_m, lo=20.0)
         _check_number(s, "net.lanes", self.lanes, lo=1, hi=6, integer=True)
         _check_number(s, "net.speed_mps", self.speed_mps, lo=0.0, lo_open=True, hi=100.0)
+        _floats(self, "spacing_m", "speed_mps")
 
 
 @dataclass(frozen=True)
@@ -203,6 +210,10 @@ class DemandSpec:
             _check_number(s, f"demand.class_mix.{name}", w, lo=0.0)
         if sum(w for _, w in self.class_mix) <= 0:
             raise _fail(s, "demand.class_mix", "weights must not all be zero", dict(self.class_mix))
+        _floats(self, "duration_s", "begin_s", "fringe_factor")
+        if self.min_distance_m is not None:
+            _floats(self, "min_distance_m")
+        object.__setattr__(self, "class_mix", tuple((k, float(w)) for k, w in self.class_mix))
 
     @property
     def mix(self) -> dict[str, float]:
@@ -271,6 +282,7 @@ class Scenario:
         _check_choice(s, "check", self.check, CHECKS)
         _check_choice(s, "switching", self.switching, SWITCHING)
         _check_choice(s, "disturbance", self.disturbance, DISTURBANCES)
+        _floats(self, "duration_s")
         if self.sumocfg is not None:
             if self.net is not None or self.demand is not None:
                 raise _fail(s, "sumocfg", "a scenario has either 'sumocfg' or [net] and [demand], not both")
