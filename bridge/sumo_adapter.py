@@ -487,9 +487,16 @@ class SumoAdapter:
         except self._exc as exc:
             raise SumoError(f"SUMO refused to add vehicle {vid!r} (type {vehicle.type_id!r}, route "
                             f"[{' '.join(vehicle.edges)}]): {exc}") from None
-        self.take_over(vid)
         x, y = (float(v) for v in xy_front)
-        self._call(f"vehicle.moveToXY({vid!r})", api.vehicle.moveToXY, vid, "", -1, x, y, float(angle_deg), 1)
+        try:
+            self.take_over(vid)
+            self._call(f"vehicle.moveToXY({vid!r})", api.vehicle.moveToXY, vid, "", -1, x, y, float(angle_deg), 1)
+        except SumoError as exc:  # all or nothing: SUMO must not insert it on its own terms
+            try:
+                api.vehicle.remove(vid, 3)  # REMOVE_VAPORIZED: never departed
+            except self._exc:
+                pass
+            raise SumoError(f"cannot admit vehicle {vid!r} at ({x:.2f}, {y:.2f}): {exc}") from None
         self._admitted.add(vid)
 
     def take_over(self, vid: str) -> None:

@@ -1,0 +1,227 @@
+"""SumoAdapter against real SUMO (libsumo): admission, moving, arrival, collisions, failures."""
+
+import os
+import xml.etree.ElementTree as ET
+
+import numpy as np
+import pytest
+
+from bridge.demand import PlannedVehicle, read_demand
+from bridge.pose import front_bumper, sumo_angle
+from bridge.sumo_adapter import SumoAdapter, SumoError
+from bridge.waypoints import load_net
+from sumo_nets.generate import write_sumocfg
+from sumo_nets.scenario import read_sumocfg
+
+
+def pose_at(r, k, length):
+    """Front bumper and SUMO angle with the vehicle's centre on waypoint k."""
+    return front_bumper(r.waypoints[k], r.heading[k], length), float(sumo_angle(r.heading[k]))
+
+
+def drive(sim, net, vehicle, delta=1.0):
+    """Admit ``vehicle`` at its first waypoint and move it one waypoint per step to the end."""
+    r = net.route(vehicle.edges, delta, vehicle_id=vehicle.id, vclass=vehicle.vclass)
+    xy, ang = pose_at(r, 0, vehicle.length)
+    sim.admit(vehicle, xy, ang, depart_lane=r.depart_lane_index)
+    sim.step()
+    assert vehicle.id in sim.departed_ids()
+    for k in range(1, r.count):
+        xy, ang = pose_at(r, k, vehicle.length)
+        sim.move([vehicle.id], xy[None], [ang])
+        sim.step()
+    return r
+
+
+def test_drive_one_vehicle_to_arrival(grid_cfg, grid_net, tmp_path):
+    net = load_net(grid_net)
+    tripinfo = tmp_path / "tripinfo.xml"
+    with SumoAdapter() as sim:
+        demand = sim.start(grid_cfg, tripinfo_path=tripinfo, seed=1)
+        assert sim.vehicle_ids() == ()  # SUMO holds no vehicle until muvsim admits it
+        sim.step()
+        assert sim.departed_ids() == () and sim.vehicle_ids() == ()
+        v = next(x for x in demand.vehicles if x.type_id == "bus") if any(
+            x.type_id == "bus" for x in demand.vehicles) else demand.vehicles[0]
+        r = net.route(v.edges, 1.0, vclass=v.vclass)
+        xy, ang = pose_at(r, 0, v.length)
+        sim.admit(v, xy, ang, depart_lane=r.depart_lane_index)
+        sim.step()
+        assert sim.departed_ids() == (v.id,)
+        info = sim.vehicle_info(v.id)
+        assert (info.type_id, info.vclass, info.length, info.width, info.edges) == (
+            v.type_id, v.vclass, v.length, v.width, v.edges)
+        got_xy, got_ang = sim.pose([v.id])
+        np.testing.assert_allclose(got_xy[0], xy, atol=1e-6)  # placed exactly where asked (straight lane)
+        assert got_ang[0] == pytest.approx(ang)
+        for k in range(1, r.count):
+            xy, ang = pose_at(r, k, v.length)
+            sim.move([v.id], xy[None], [ang])
+            sim.step()
+            if k == r.count // 2:
+                assert sim.vehicle_info(v.id).edges == v.edges  # keepRoute=1 keeps the route
+        assert v.id in sim.vehicle_ids()  # moveToXY never ends a trip by itself
+        sim.finish(v.id)
+        sim.step()
+        assert sim.arrived_ids() == (v.id,)
+        assert sim.vehicle_ids() == ()
+        assert sim.collisions() == []
+    trips = {t.get("id"): t.attrib for t in ET.parse(tripinfo).getroot().iter("tripinfo")}
+    assert set(trips) == {v.id}
+    t = trips[v.id]
+    assert t["vaporized"] == "" and t["arrivalLane"].rsplit("_", 1)[0] == v.edges[-1]
+    assert float(t["routeLength"]) == pytest.approx(r.length_m, rel=0.05)
+
+
+def test_collisions_are_reported_once_per_contact(grid_cfg, grid_net):
+    net = load_net(grid_net)
+    with SumoAdapter() as sim:
+        demand = sim.start(grid_cfg)
+        base = demand.vehicles[0]
+        a = PlannedVehicle("A", "car", 0.0, base.edges, None, None, "passenger", 5.0, 1.8)
+        b = PlannedVehicle("B", "car", 0.0, base.edges, None, None, "passenger", 5.0, 1.8)
+        r = net.route(base.edges, 1.0)
+        k0 = 12
+        xa, ang = pose_at(r, k0, 5.0)
+        xb, _ = pose_at(r, k0 + 20, 5.0)
+        sim.admit(a, xa, ang, depart_lane=r.depart_lane_index)
+        sim.admit(b, xb, ang, depart_lane=r.depart_lane_index)
+        sim.step()
+        assert set(sim.departed_ids()) == {"A", "B"}
+        assert sim.collisions() == []
+        # drive B back onto A's spot and keep it there for 5 steps
+        for k in [k0 + 10, k0 + 2, k0 + 1, k0 + 1, k0 + 1, k0 + 1]:
+            sim.move(["A", "B"], np.stack([xa, pose_at(r, k, 5.0)[0]]), [ang, ang])
+            sim.step()
+        events = sim.collisions()
+        assert len(events) == 1
+        assert events[0].pair == ("A", "B") and {events[0].collider, events[0].victim} == {"A", "B"}
+        sim.move(["A", "B"], np.stack([xa, pose_at(r, k0 + 1, 5.0)[0]]), [ang, ang])
+        sim.step()
+        assert sim.collisions() == []  # still in contact: not new
+        # separate, then touch again: a new contact
+        for k in [k0 + 15, k0 + 15, k0 + 1]:
+            sim.move(["A", "B"], np.stack([xa, pose_at(r, k, 5.0)[0]]), [ang, ang])
+            sim.step()
+        again = sim.collisions()
+        assert len(again) == 1 and again[0].pair == ("A", "B")
+        assert sim.collision_count == 2
+
+
+def test_admission_is_never_refused_even_on_an_occupied_spot(grid_cfg, grid_net):
+    """Forced insertion: SUMO's own gap checks would delay this vehicle; moveToXY inserts it at once."""
+    net = load_net(grid_net)
+    with SumoAdapter() as sim:
+        demand = sim.start(grid_cfg)
+        v0, v1 = demand.vehicles[0], PlannedVehicle("twin", "car", 0.0, demand.vehicles[0].edges, None, None,
+                                                    "passenger", 5.0, 1.8)
+        r = net.route(v0.edges, 1.0)
+        xy, ang = pose_at(r, 3, 5.0)
+        sim.admit(v0, xy, ang)
+        sim.admit(v1, xy, ang)
+        sim.step()
+        assert set(sim.departed_ids()) == {v0.id, "twin"}
+
+
+def test_sumocfg_written_by_the_test_runs(grid_net, grid_routes, tmp_path):
+    cfg = write_sumocfg(tmp_path / "mine.sumocfg", grid_net, [grid_routes])
+    net = load_net(grid_net)
+    with SumoAdapter() as sim:
+        demand = sim.start(cfg)
+        assert len(demand) == len(read_demand(grid_routes))
+        drive(sim, net, demand.vehicles[1], delta=2.0)
+        assert sim.sim_time() > 1.0
+
+
+def test_start_from_net_and_routes_then_restart(grid_net, grid_routes):
+    with SumoAdapter() as sim:
+        d = sim.start(net=grid_net, routes=grid_routes, step_length=0.1)
+        sim.step()
+        assert sim.sim_time() == pytest.approx(0.1)
+        with pytest.raises(SumoError, match="already runs"):
+            sim.start(net=grid_net, routes=grid_routes)
+        with pytest.raises(SumoError, match="libsumo already runs a simulation"):
+            SumoAdapter().start(net=grid_net, routes=grid_routes)
+    assert len(d) > 0
+    with SumoAdapter() as sim:  # closed cleanly: libsumo can start again in this process
+        sim.start(net=grid_net)
+        sim.step()
+
+
+def test_bad_net_file_gives_sumo_error_naming_it(tmp_path, grid_net, grid_routes):
+    broken = tmp_path / "broken.net.xml"
+    broken.write_text("<net><edge")  # libsumo would segfault on this; we must not
+    with pytest.raises(SumoError, match=r"broken\.net\.xml.*not well-formed"):
+        SumoAdapter().start(net=broken, routes=grid_routes)
+    bogus = tmp_path / "bogus.net.xml"
+    bogus.write_text('<net version="1.20"><edge id="e" from="a" to="b" priority="1">'
+                     '<lane id="e_0" index="0" speed="1" length="10" shape="0,0 10,0"/></edge></net>')
+    with pytest.raises(SumoError, match=r"bogus\.net\.xml.*failed to start: .*(Error|error)"):
+        SumoAdapter().start(net=bogus)
+    with pytest.raises(SumoError, match=r"missing\.net\.xml does not exist"):
+        SumoAdapter().start(net=tmp_path / "missing.net.xml")
+    cfg = tmp_path / "c.sumocfg"
+    cfg.write_text('<configuration><input><net-file value="broken.net.xml"/></input></configuration>')
+    with pytest.raises(SumoError, match=r"broken\.net\.xml"):
+        SumoAdapter().start(cfg)
+    # nothing was left running: a good start still works
+    with SumoAdapter() as sim:
+        sim.start(net=grid_net)
+        sim.step()
+
+
+def test_faults_mid_run_become_sumo_errors(grid_cfg):
+    sim = SumoAdapter()
+    with pytest.raises(SumoError, match="no simulation is running"):
+        sim.step()
+    with sim:
+        demand = sim.start(grid_cfg)
+        with pytest.raises(SumoError, match="'ghost'"):
+            sim.move(["ghost"], [[0.0, 0.0]], [0.0])
+        with pytest.raises(SumoError, match="ghost"):
+            sim.finish("ghost")
+        v = demand.vehicles[0]
+        with pytest.raises(SumoError, match=rf"cannot admit vehicle '{v.id}'.*Could not map"):
+            sim.admit(v, [-5000.0, -5000.0], 0.0)  # far off its route
+        sim.step()
+        assert sim.vehicle_ids() == ()  # all or nothing: no half-admitted vehicle left to SUMO
+        r = load_net(read_sumocfg(grid_cfg).net).route(v.edges, 1.0)
+        xy, ang = pose_at(r, 0, v.length)
+        sim.admit(v, xy, ang)
+        with pytest.raises(SumoError, match="refused to add vehicle"):
+            sim.admit(v, xy, ang)  # the same id twice
+        sim.step()
+        assert sim.departed_ids() == (v.id,)
+        with pytest.raises(ValueError, match="2 ids"):
+            sim.move(["a", "b"], [[0.0, 0.0]], [0.0])
+    sim.close()  # twice: harmless
+    with pytest.raises(SumoError, match="no simulation"):
+        sim.sim_time()
+
+
+def test_gui_without_display_is_a_clear_error(grid_cfg, monkeypatch):
+    monkeypatch.delenv("DISPLAY", raising=False)
+    with pytest.raises(SumoError, match=r"\$DISPLAY is not set"):
+        SumoAdapter().start(grid_cfg, gui=True)
+
+
+def test_traci_backend(grid_cfg, grid_net, tmp_path):
+    net = load_net(grid_net)
+    tripinfo = tmp_path / "ti.xml"
+    with SumoAdapter(backend="traci") as sim:
+        demand = sim.start(grid_cfg, tripinfo_path=tripinfo)
+        v = demand.vehicles[0]
+        drive(sim, net, v, delta=3.0)
+        sim.finish(v.id)
+        sim.step()
+        assert sim.arrived_ids() == (v.id,)
+    assert v.id in tripinfo.read_text()
+    with pytest.raises(ValueError, match="backend"):
+        SumoAdapter(backend="carla")
+
+
+@pytest.mark.skipif(not os.environ.get("DISPLAY"), reason="needs a display")
+def test_gui_with_display(grid_cfg):  # pragma: no cover - only where a display exists
+    with SumoAdapter() as sim:
+        sim.start(grid_cfg, gui=True)
+        sim.step()

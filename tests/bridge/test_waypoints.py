@@ -1,0 +1,150 @@
+"""Routes as polylines through lane shapes and junction-internal lanes, waypoints <= delta apart on them."""
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from bridge.waypoints import RouteError, load_net, point_polyline_distance, route_waypoints, subsample
+
+#: Waypoints lie on the polyline up to round-off of the interpolation (coordinates ~ 1e2..1e3 m).
+ON_POLYLINE_TOL = 1e-9
+#: ... and, outside lane changes, on the centre line of the lane they report (SUMO's shapes, 2 decimals).
+ON_LANE_TOL = 1e-6
+
+
+def check_waypoints(net, r, delta):
+    w = r.waypoints
+    assert w.shape == (r.count, 2) and r.count >= 2
+    steps = np.hypot(*np.diff(w, axis=0).T)
+    assert steps.max() <= delta + 1e-9
+    assert np.all(np.diff(r.arc_length) > 0) and r.arc_length[0] == 0
+    assert r.arc_length[-1] == pytest.approx(r.length_m)
+    assert np.all(steps <= np.diff(r.arc_length) + 1e-9)  # chords never exceed arcs
+    assert point_polyline_distance(w, r.polyline).max() <= ON_POLYLINE_TOL
+    np.testing.assert_array_equal(w[0], r.polyline[0])
+    np.testing.assert_array_equal(w[-1], r.polyline[-1])
+    for k in np.nonzero(r.on_lane)[0]:
+        d = point_polyline_distance(w[k], net.lane_shape(r.lane_ids[k]))[0]
+        assert d <= ON_LANE_TOL, (k, r.lane_ids[k], d)
+    # every polyline segment on a lane lies on that lane's centre line
+    for i, (lane, on) in enumerate(zip(r.segment_lanes, r.segment_on_lane)):
+        if on:
+            assert point_polyline_distance(r.polyline[i:i + 2], net.lane_shape(lane)).max() <= ON_LANE_TOL
+    # the route's edges are visited in order, with internal lanes between consecutive edges
+    edge_seq = [lid.rsplit("_", 1)[0] for lid in r.segment_lanes if not lid.startswith(":")]
+    assert [e for i, e in enumerate(edge_seq) if i == 0 or edge_seq[i - 1] != e] == list(r.edges)
+    if len(r.edges) > 1:
+        assert any(lid.startswith(":") for lid in r.segment_lanes)
+    # off-lane parts (lane changes) stay between the lanes of their edge
+    off = ~r.on_lane
+    if off.any():
+        for k in np.nonzero(off)[0]:
+            edge = r.lane_ids[k].rsplit("_", 1)[0]
+            lanes = [net.lane_shape(f"{edge}_{i}") for i in range(net.lane_count(edge))]
+            assert min(point_polyline_distance(w[k], s)[0] for s in lanes) <= 3.2 * (len(lanes) - 1)
+
+
+@st.composite
+def routes(draw, net):
+    edges = [e for e in sorted(net._net.getEdges()) if e.getFunction() != "internal"]
+    start = draw(st.sampled_from([e.getID() for e in edges]))
+    route = [start]
+    for _ in range(draw(st.integers(0, 7))):
+        succ = net.successors(route[-1])
+        if not succ:
+            break
+        route.append(draw(st.sampled_from(succ)))
+    return route
+
+
+def test_random_routes_and_deltas(grid_net):
+    net = load_net(grid_net)
+
+    @settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+    @given(route=routes(net), delta=st.floats(0.3, 15.0), lane=st.one_of(st.none(), st.integers(0, 1)))
+    def prop(route, delta, lane):
+        r = route_waypoints(net, route, delta, depart_lane=lane, vehicle_id="h")
+        check_waypoints(net, r, delta)
+        if lane is not None:
+            assert r.segment_lanes[0] == f"{route[0]}_{lane}"
+
+    prop()
+
+
+def turn_route(net, direction):
+    """A two-edge route with a turn of the given SUMO direction ('r', 'l', 's')."""
+    for e in sorted(net._net.getEdges(), key=lambda e: e.getID()):
+        if e.getFunction() == "internal":
+            continue
+        for to, conns in sorted(e.getOutgoing().items(), key=lambda kv: kv[0].getID()):
+            if conns and all(c.getDirection() == direction for c in conns):
+                return [e.getID(), to.getID()], conns
+    raise AssertionError(f"no {direction} turn in the grid")
+
+
+def test_right_turns_leave_from_lane_0_and_left_turns_from_the_leftmost(grid_net):
+    net = load_net(grid_net)
+    right, _ = turn_route(net, "r")
+    left, _ = turn_route(net, "l")
+    r = route_waypoints(net, right, 2.0)
+    l_ = route_waypoints(net, left, 2.0)
+    assert r.lanes[0] == f"{right[0]}_0"
+    assert l_.lanes[0] == f"{left[0]}_{net.lane_count(left[0]) - 1}"
+    # the polyline turns by ~90 degrees through internal lanes
+    for wp in (r, l_):
+        assert any(lid.startswith(":") for lid in wp.lane_ids)
+        turn = np.degrees((wp.heading[-1] - wp.heading[0] + np.pi) % (2 * np.pi) - np.pi)
+        assert abs(abs(turn) - 90) < 1
+    assert np.degrees((r.heading[-1] - r.heading[0] + np.pi) % (2 * np.pi) - np.pi) < 0  # right = clockwise
+
+
+def test_right_then_left_changes_lane(grid_net):
+    net = load_net(grid_net)
+    # find e0 -r-> e1 -l-> e2
+    for e0 in sorted(e.getID() for e in net._net.getEdges() if e.getFunction() != "internal"):
+        for e1 in net.successors(e0):
+            if not all(c.from_lane == 0 for c in net.connections(e0, e1)):
+                continue
+            for e2 in net.successors(e1):
+                cs = net.connections(e1, e2)
+                if all(c.from_lane == net.lane_count(e1) - 1 for c in cs) and cs[0].from_lane > 0:
+                    r = route_waypoints(net, [e0, e1, e2], 3.0)
+                    assert not r.on_lane.all()  # a lane change on e1
+                    check_waypoints(net, r, 3.0)
+                    assert r.lanes == (f"{e0}_0", f"{e1}_1", r.lanes[2])
+                    return
+    raise AssertionError("no right-then-left route found")
+
+
+def test_unreachable_route_names_vehicle_and_edges(grid_net):
+    net = load_net(grid_net)
+    right, _ = turn_route(net, "r")
+    far = [e for e in sorted(x.getID() for x in net._net.getEdges() if x.getFunction() != "internal")
+           if e not in net.successors(right[0]) and e != right[0]][0]
+    with pytest.raises(RouteError, match=rf"vehicle 'v7'.*no connection from edge '{right[0]}' to edge '{far}'"):
+        route_waypoints(grid_net, [right[0], far], 3.0, vehicle_id="v7")
+    with pytest.raises(RouteError, match=r"vehicle 'v8'.*edge 'nowhere'"):
+        route_waypoints(grid_net, [right[0], "nowhere"], 3.0, vehicle_id="v8")
+    with pytest.raises(RouteError, match="depart lane 5"):
+        route_waypoints(grid_net, right, 3.0, depart_lane=5)
+
+
+def test_net_is_read_once_per_file_and_routes_memoised(grid_net):
+    assert load_net(grid_net) is load_net(str(grid_net))
+    net = load_net(grid_net)
+    right, _ = turn_route(net, "r")
+    a = route_waypoints(net, right, 3.0, vehicle_id="a")
+    b = route_waypoints(net, right, 3.0, vehicle_id="b")
+    assert a.waypoints is b.waypoints and (a.vehicle_id, b.vehicle_id) == ("a", "b")
+
+
+def test_subsample_keeps_corners_and_spacing():
+    poly = np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 7.0]])
+    pts, arc = subsample(poly, 3.0)
+    assert any(np.allclose(p, [10.0, 0.0]) for p in pts)  # the corner itself is a waypoint
+    assert np.hypot(*np.diff(pts, axis=0).T).max() <= 3.0 + 1e-12
+    assert len(pts) == 1 + 4 + 3  # fewest equal parts per side: 10/4 = 2.5, 7/3 = 2.33
+    np.testing.assert_allclose(arc[-1], 17.0)
+    with pytest.raises(ValueError, match="delta"):
+        subsample(poly, 0.0)
