@@ -15,7 +15,11 @@ vehicle at admission.  This module reads route files into that plan:
   lane), ``departPos`` in metres.
 
 ``<trip>``, ``<flow>``, persons and distributions are refused with a clear
-error: route them into vehicles first (``duarouter``).
+error: route them into vehicles first (:func:`needs_routing` tells;
+:func:`sumo_nets.generate.route_demand` runs ``duarouter``, which routes trips
+and expands flows; :class:`~bridge.sumo_adapter.SumoAdapter` does so itself).
+vTypes defined in additional files (``type_files``) are known but not handed
+to SUMO again (SUMO loads those files itself).
 """
 
 from __future__ import annotations
@@ -29,6 +33,7 @@ from pathlib import Path
 from typing import Iterable, Mapping, Sequence
 
 __all__ = ["DemandError", "VehicleType", "PlannedVehicle", "Demand", "DepartureQueue", "read_demand", "demand_from",
+           "needs_routing",
            "VCLASS_DEFAULTS"]
 
 #: SUMO's default (length, width) per vClass (m), for vTypes that do not set them.
@@ -186,13 +191,30 @@ def _vtype(file: Path, elem: ET.Element) -> VehicleType:
     return VehicleType(vid, vclass, length, width, ET.tostring(elem, encoding="unicode").strip())
 
 
-def read_demand(route_files: str | os.PathLike | Sequence[str | os.PathLike]) -> Demand:
+def needs_routing(route_files: str | os.PathLike | Sequence[str | os.PathLike]) -> bool:
+    """Whether route files hold ``<trip>`` or ``<flow>`` elements (to be routed by duarouter first)."""
+    files = [Path(route_files)] if isinstance(route_files, (str, os.PathLike)) else [Path(f) for f in route_files]
+    for file in files:
+        try:
+            for _, elem in ET.iterparse(file, events=("start",)):
+                if elem.tag in ("trip", "flow"):
+                    return True
+        except (OSError, ET.ParseError):
+            return False  # read_demand reports it with the file named
+    return False
+
+
+def read_demand(route_files: str | os.PathLike | Sequence[str | os.PathLike], *,
+                type_files: Sequence[str | os.PathLike] = ()) -> Demand:
     """Read route files into a :class:`Demand`.
 
     Parameters
     ----------
     route_files : path or sequence of paths
         SUMO route files (``.rou.xml``), read in order.
+    type_files : sequence of paths
+        Additional files whose ``<vType>`` elements the vehicles may use
+        (SUMO loads these files itself, so their vTypes get no ``xml``).
 
     Raises
     ------
@@ -205,6 +227,16 @@ def read_demand(route_files: str | os.PathLike | Sequence[str | os.PathLike]) ->
     routes: dict[str, tuple[str, ...]] = {}
     raw: list[tuple[float, int, Path, ET.Element, tuple[str, ...]]] = []
     seen: set[str] = set()
+    external: set[str] = set()  # vTypes SUMO loads from additional files itself
+    for file in (Path(f) for f in type_files):
+        try:
+            root = ET.parse(file).getroot()
+        except (OSError, ET.ParseError) as exc:
+            raise DemandError(f"{file}: cannot read additional file: {exc}") from None
+        for elem in root.iter("vType"):
+            t = _vtype(file, elem)
+            types[t.id] = VehicleType(t.id, t.vclass, t.length, t.width, "")
+            external.add(t.id)
     for file in files:
         try:
             root = ET.parse(file).getroot()
@@ -216,7 +248,8 @@ def read_demand(route_files: str | os.PathLike | Sequence[str | os.PathLike]) ->
             tag = elem.tag
             if tag == "vType":
                 t = _vtype(file, elem)
-                types[t.id] = t
+                if t.id not in external:  # duarouter copies vTypes of additional files into its output
+                    types[t.id] = t
             elif tag == "route":
                 rid, edges = elem.get("id"), (elem.get("edges") or "").split()
                 if not rid or not edges:

@@ -55,7 +55,7 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
-from bridge.demand import Demand, DemandError, PlannedVehicle, read_demand
+from bridge.demand import Demand, DemandError, PlannedVehicle, needs_routing, read_demand
 
 __all__ = ["SumoError", "CollisionEvent", "VehicleInfo", "SumoAdapter"]
 
@@ -206,7 +206,9 @@ class SumoAdapter:
         net : path, optional
             Network, when no ``sumocfg`` is given.
         routes : path or sequence of paths, optional
-            Route files with the demand (vTypes and vehicles with routes).
+            Route files with the demand (vTypes and vehicles with routes;
+            trips and flows are routed by ``duarouter`` first).  With a
+            ``sumocfg`` they replace its route-files.
         step_length : float
             Seconds per step.
         seed : int, optional
@@ -260,20 +262,32 @@ class SumoAdapter:
             net_path = Path(net).resolve()
             route_paths = [] if routes is None else (
                 [Path(routes)] if isinstance(routes, (str, os.PathLike)) else [Path(r) for r in routes])
+        additional = list(cfg.additional) if cfg_path is not None else []
         _check_xml("network", Path(net_path))
         for r in route_paths:
             _check_xml("route file", Path(r))
-        try:
-            demand = read_demand(route_paths)
-        except DemandError as exc:
-            raise SumoError(f"cannot read the demand: {exc}") from None
-
         if work_dir is None:
             self._tmp = Path(tempfile.mkdtemp(prefix="muvsim-sumo-"))
             wd = self._tmp
         else:
             wd = Path(work_dir)
             wd.mkdir(parents=True, exist_ok=True)
+        try:
+            if route_paths and needs_routing(route_paths):
+                from sumo_nets.generate import route_demand
+                from sumo_nets.sumo_tools import SumoToolError
+
+                try:
+                    route_paths = [route_demand(net_path, route_paths, wd / "routed", additional=additional)]
+                except SumoToolError as exc:
+                    raise SumoError(f"cannot route the trips/flows of the demand: {exc}") from None
+            demand = read_demand(route_paths, type_files=additional)
+        except DemandError as exc:
+            self._cleanup_tmp()
+            raise SumoError(f"cannot read the demand: {exc}") from None
+        except SumoError:
+            self._cleanup_tmp()
+            raise
         vtypes = wd / "vtypes.rou.xml"
         vtypes.write_text(demand.vtypes_xml(), encoding="utf-8")
 

@@ -225,3 +225,24 @@ def test_gui_with_display(grid_cfg):  # pragma: no cover - only where a display 
     with SumoAdapter() as sim:
         sim.start(grid_cfg, gui=True)
         sim.step()
+
+
+def test_user_sumocfg_with_trips_flows_and_additional_vtypes(grid_net, tmp_path):
+    net = load_net(grid_net)
+    e0 = sorted(e.getID() for e in net._net.getEdges() if e.getFunction() != "internal")[0]
+    e1 = net.successors(e0)[0]
+    e2 = net.successors(e1)[0]
+    (tmp_path / "types.add.xml").write_text('<additional><vType id="van" vClass="delivery"/></additional>')
+    (tmp_path / "demand.rou.xml").write_text(f"""<routes>
+        <flow id="f" type="van" begin="0" end="20" number="3" from="{e0}" to="{e2}"/>
+        <trip id="t" depart="1" from="{e0}" to="{e1}"/>
+    </routes>""")
+    (tmp_path / "user.sumocfg").write_text(f"""<configuration><input>
+        <net-file value="{grid_net}"/><route-files value="demand.rou.xml"/>
+        <additional-files value="types.add.xml"/></input></configuration>""")
+    with SumoAdapter() as sim:
+        demand = sim.start(tmp_path / "user.sumocfg")
+        assert [v.id for v in demand.vehicles] == ["f.0", "t", "f.1", "f.2"]
+        assert demand.by_id()["f.1"].length == 6.5 and demand.by_id()["f.1"].edges[-1] == e2
+        drive(sim, net, demand.by_id()["f.0"], delta=3.0)
+        assert sim.vehicle_info("f.0").type_id == "van"

@@ -8,7 +8,7 @@ import pytest
 import sumo_nets.generate as gen
 from bridge.waypoints import load_net
 from sumo_nets.generate import DEFAULT_VTYPES, GenerateError, make_demand, make_grid, sumocfg_for, write_sumocfg
-from sumo_nets.sumo_tools import binary
+from sumo_nets.sumo_tools import SumoToolError, binary
 
 MIX = {"car": 0.6, "bus": 0.2, "truck": 0.2}  # as in conftest.py
 
@@ -116,3 +116,23 @@ def test_demand_rejects_bad_parameters(small_net, tmp_path, kwargs, field):
     args = dict(seed=1, vehicles=10, duration_s=10.0, class_mix={"car": 1.0}) | kwargs
     with pytest.raises(GenerateError, match=field):
         make_demand(small_net, tmp_path, **args)
+
+
+def test_route_demand_routes_trips_and_expands_flows(small_net, tmp_path):
+    from bridge.waypoints import load_net
+
+    net = load_net(small_net)
+    e0 = sorted(e.getID() for e in net._net.getEdges() if e.getFunction() != "internal")[0]
+    e2 = net.successors(net.successors(e0)[0])[0]
+    src = tmp_path / "in.rou.xml"
+    src.write_text(f'<routes><flow id="f" begin="0" end="10" number="2" from="{e0}" to="{e2}"/></routes>')
+    a = gen.route_demand(small_net, [src], tmp_path / "a")
+    b = gen.route_demand(small_net, [src], tmp_path / "b")
+    assert a.read_bytes() == b.read_bytes()
+    vehicles = list(ET.parse(a).getroot().iter("vehicle"))
+    assert [v.get("id") for v in vehicles] == ["f.0", "f.1"]
+    assert vehicles[0].find("route").get("edges").split()[-1] == e2
+    bad = tmp_path / "bad.rou.xml"
+    bad.write_text(f'<routes><trip id="x" depart="0" from="{e0}" to="nowhere"/></routes>')
+    with pytest.raises(SumoToolError, match="nowhere"):
+        gen.route_demand(small_net, [bad], tmp_path / "c")
