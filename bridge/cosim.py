@@ -1,0 +1,389 @@
+"""The co-simulation loop: vehicles under ST-MPC, the traffic manager, and a world adapter.
+
+The loop only talks to a :class:`World` adapter (the free plane, or SUMO
+through :mod:`bridge.sumo_world`), to the controllers and to the traffic
+manager.  One step (``Ts``) is:
+
+1. every active vehicle computes its membership index ``l`` w.r.t. its
+   current waypoint and, when it may switch (``terminal``: ``l = 0``;
+   ``early``: its state lies in the next waypoint's domain), a request
+   ``(l', r̄)`` w.r.t. the next waypoint;
+2. the TM grants or denies the requests (:class:`tm.manager.TrafficManager`);
+3. granted vehicles switch; every vehicle applies the terminal law or the
+   QP of eq. (6) (:class:`controllers.stmpc.STMPC`, vectorised per class);
+4. the plant steps with the disturbance policy; the index must strictly
+   decrease until 0 and then stay 0 (tube invariant, counted otherwise);
+5. vehicles at their last waypoint with ``l = 0`` arrive; waiting vehicles
+   whose initial tube is free are admitted (condition (12));
+6. the monitor checks footprints and claims; the world is pushed and stepped.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Protocol
+
+import numpy as np
+
+from controllers.classes import VehicleClass
+from controllers.plant import DISTURBANCES, step as plant_step
+from controllers.settings import ControllerSettings, SynthesisSettings
+from controllers.stmpc import STMPC
+from controllers.synthesis import synthesize
+from tm.manager import FleetState, TrafficManager
+from tm.monitor import Monitor
+from tm.settings import TMSettings
+
+__all__ = ["VehicleSpec", "CosimSettings", "World", "FreePlaneWorld", "Cosim", "VehicleRecord"]
+
+
+@dataclass(frozen=True)
+class VehicleSpec:
+    """A vehicle to run: id, class name, waypoints (K, 2) at most delta apart, departure time."""
+
+    id: str
+    vclass: str
+    waypoints: np.ndarray
+    depart_s: float = 0.0
+
+    @property
+    def route_length_m(self) -> float:
+        return float(np.linalg.norm(np.diff(self.waypoints, axis=0), axis=1).sum())
+
+
+@dataclass(frozen=True)
+class CosimSettings:
+    """Options of one co-simulation run (validated)."""
+
+    tm: TMSettings = field(default_factory=TMSettings)
+    switching: str = "early"
+    disturbance: str = "random"
+    solver: str = "exact"
+    seed: int = 0
+    duration_s: float | None = None
+    Ts: float = 0.1
+
+    def __post_init__(self) -> None:
+        ControllerSettings(solver=self.solver, switching=self.switching)  # validates both
+        if self.disturbance not in DISTURBANCES:
+            raise ValueError(f"CosimSettings.disturbance: must be one of {DISTURBANCES}, "
+                             f"got {self.disturbance!r}")
+        if self.duration_s is not None and not self.duration_s > 0:
+            raise ValueError(f"CosimSettings.duration_s: must be > 0 s or None, got {self.duration_s}")
+
+
+class World(Protocol):
+    """What the loop needs from a simulator."""
+
+    def insert(self, spec: VehicleSpec, vclass: VehicleClass) -> None: ...
+    def push(self, ids: list[str], centre: np.ndarray, heading: np.ndarray) -> None: ...
+    def finish(self, vid: str) -> None: ...
+    def step(self) -> list[tuple[str, str]]: ...
+
+
+class FreePlaneWorld:
+    """No simulator: muvsim's own plant and geometric monitor are the whole world."""
+
+    def insert(self, spec, vclass) -> None:
+        pass
+
+    def push(self, ids, centre, heading) -> None:
+        pass
+
+    def finish(self, vid) -> None:
+        pass
+
+    def step(self) -> list:
+        return []
+
+
+@dataclass
+class VehicleRecord:
+    """Per-vehicle KPI accumulator."""
+
+    id: str
+    vclass: str
+    depart_s: float
+    route_length_m: float
+    admitted_s: float | None = None
+    arrived_s: float | None = None
+    denials: int = 0
+    stop_episodes: int = 0
+    stopped_steps: int = 0
+    closest_m: float = np.inf
+    speed_sum: float = 0.0
+    steps: int = 0
+    _denied_last: bool = False
+
+
+class _Group:
+    """The active vehicles of one class, as arrays."""
+
+    def __init__(self, vclass: VehicleClass, ctl: STMPC):
+        self.vclass = vclass
+        self.ctl = ctl
+        n = vclass.model.n
+        self.ids: list[str] = []
+        self.X = np.zeros((0, n))
+        self.k = np.zeros(0, dtype=np.intp)
+        self.l = np.zeros(0, dtype=np.intp)
+        self.W: list[np.ndarray] = []
+        self.H: list[np.ndarray] = []
+
+    def add(self, vid, W, H, x0, l0):
+        self.ids.append(vid)
+        self.X = np.vstack([self.X, x0[None]])
+        self.k = np.append(self.k, 0)
+        self.l = np.append(self.l, l0)
+        self.W.append(W)
+        self.H.append(H)
+
+    def remove(self, mask):
+        keep = ~mask
+        self.ids = [v for v, k in zip(self.ids, keep) if k]
+        self.X, self.k, self.l = self.X[keep], self.k[keep], self.l[keep]
+        self.W = [w for w, k in zip(self.W, keep) if k]
+        self.H = [h for h, k in zip(self.H, keep) if k]
+
+    def centres(self, offset=0):
+        if not self.ids:
+            return np.zeros((0, 2)), np.zeros(0), np.zeros(0, dtype=bool)
+        kk = [min(k + offset, len(W) - 1) for k, W in zip(self.k, self.W)]
+        C = np.array([W[k] for W, k in zip(self.W, kk)])
+        Hd = np.array([H[k] for H, k in zip(self.H, kk)])
+        has = np.array([k + offset < len(W) for k, W in zip(self.k, self.W)])
+        return C, Hd, has
+
+
+def _headings(W: np.ndarray) -> np.ndarray:
+    """Heading of the segment arriving at each waypoint (the first takes the first segment's)."""
+    d = np.diff(W, axis=0)
+    h = np.arctan2(d[:, 1], d[:, 0]) if len(d) else np.zeros(0)
+    return np.concatenate([h[:1] if len(h) else [0.0], h])
+
+
+class Cosim:
+    """One co-simulation run.
+
+    Parameters
+    ----------
+    classes : mapping of str to VehicleClass
+        Every class a spec may name.
+    specs : list of VehicleSpec
+    settings : CosimSettings
+    world : World, optional
+        Defaults to :class:`FreePlaneWorld`.
+    synthesis : SynthesisSettings, optional
+    """
+
+    def __init__(self, classes, specs, settings: CosimSettings, world=None,
+                 synthesis: SynthesisSettings | None = None):
+        self.settings = settings
+        self.world = world or FreePlaneWorld()
+        used = sorted({s.vclass for s in specs})
+        missing = [c for c in used if c not in classes]
+        if missing:
+            raise ValueError(f"vehicle class(es) {missing} unknown; valid: {sorted(classes)}")
+        self.classes = {c: classes[c] for c in used}
+        for s in specs:
+            W = np.asarray(s.waypoints, dtype=float)
+            if W.ndim != 2 or W.shape[1] != 2 or len(W) < 2:
+                raise ValueError(f"vehicle {s.id}: waypoints must be (K >= 2, 2), got {W.shape}")
+            gaps = np.linalg.norm(np.diff(W, axis=0), axis=1)
+            delta = self.classes[s.vclass].model.delta
+            if np.any(gaps > delta + 1e-9):
+                i = int(np.argmax(gaps))
+                raise ValueError(f"vehicle {s.id}: waypoints {i} and {i + 1} are {gaps[i]:.3f} m apart; "
+                                 f"class {s.vclass!r} needs at most delta = {delta} m")
+        if len({s.id for s in specs}) != len(specs):
+            raise ValueError("vehicle ids must be unique")
+        cs = ControllerSettings(solver=settings.solver, switching=settings.switching)
+        self.families = {c: synthesize(vc.model, synthesis) for c, vc in self.classes.items()}
+        self.groups = {c: _Group(vc, STMPC(self.families[c], cs)) for c, vc in self.classes.items()}
+        self.tm = TrafficManager(settings.tm, {c: f.position_sets for c, f in self.families.items()})
+        self.monitor = Monitor(settings.tm.check)
+        self.pending = sorted(specs, key=lambda s: (s.depart_s, s.id))
+        self.records = {s.id: VehicleRecord(s.id, s.vclass, s.depart_s, s.route_length_m) for s in specs}
+        self.rng = np.random.default_rng(settings.seed)
+        self.t = 0
+        self.step_rows: list[dict] = []
+        self.invariant_violations = 0
+        self.constraint_violations = 0
+        self.collisions_world: set = set()
+        self.last_decision = None
+
+    # -------------------------------------------------------------- state
+    def _fleet(self, with_requests: bool):
+        ids, fam, C, L, H, Ln, Wd = [], [], [], [], [], [], []
+        RQ, RC, RL, RH = [], [], [], []
+        for c, g in self.groups.items():
+            if not g.ids:
+                continue
+            cen, hd, _ = g.centres()
+            ids += g.ids
+            fam += [c] * len(g.ids)
+            C.append(cen)
+            L.append(g.l)
+            H.append(hd)
+            Ln.append(np.full(len(g.ids), g.vclass.length))
+            Wd.append(np.full(len(g.ids), g.vclass.width))
+            if with_requests:
+                nxt, nh, has = g.centres(1)
+                lp = g.ctl.index(g.X, nxt)
+                may = has & (lp <= g.ctl.N)
+                if self.settings.switching == "terminal":
+                    may &= g.l == 0
+                RQ.append(may)
+                RC.append(nxt)
+                RL.append(np.minimum(lp, g.ctl.N))
+                RH.append(nh)
+        if not ids:
+            return None
+        cat = np.concatenate
+        kw = {}
+        if with_requests:
+            kw = dict(requesting=cat(RQ), req_centre=np.vstack(RC), req_index=cat(RL), req_heading=cat(RH))
+        return FleetState(ids=ids, family=np.array(fam), centre=np.vstack(C), index=cat(L), heading=cat(H),
+                          length=cat(Ln), width=cat(Wd), **kw)
+
+    # -------------------------------------------------------------- one step
+    def step(self) -> dict:
+        s = self.settings
+        t_s = self.t * s.Ts
+        row = {"t_s": round(t_s, 6)}
+        tt = time.perf_counter()
+        state = self._fleet(with_requests=True)
+        n_req = n_go = 0
+        ms_tm = 0.0
+        if state is not None:
+            dec = self.tm.decide(state)
+            self.last_decision = dec
+            ms_tm = (time.perf_counter() - tt) * 1e3
+            n_req, n_go = int(state.requesting.sum()), int(dec.go.sum())
+            go = dict(zip(state.ids, dec.go))
+            req = dict(zip(state.ids, state.requesting))
+            for c, g in self.groups.items():
+                if not g.ids:
+                    continue
+                gmask = np.array([go[v] for v in g.ids])
+                rmask = np.array([req[v] for v in g.ids])
+                if gmask.any():
+                    nxt, _, _ = g.centres(1)
+                    lp = g.ctl.index(g.X[gmask], nxt[gmask])
+                    g.k[gmask] += 1
+                    g.l[gmask] = lp
+                for v, r, gg in zip(g.ids, rmask, gmask):
+                    rec = self.records[v]
+                    denied = bool(r and not gg)
+                    if denied:
+                        rec.denials += 1
+                        rec.stopped_steps += 1
+                        if not rec._denied_last:
+                            rec.stop_episodes += 1
+                    rec._denied_last = denied
+            row["edges"] = int(len(dec.edges))
+        # controls and plant
+        tc = time.perf_counter()
+        for c, g in self.groups.items():
+            if not g.ids:
+                continue
+            m = g.vclass.model
+            cen, _, _ = g.centres()
+            U = g.ctl.control(g.X, cen, g.l, ids=g.ids)
+            g.X, _ = plant_step(m, g.X, U, cen, s.disturbance, self.rng)
+            l_new = g.ctl.index(g.X, cen)
+            bad = ~((l_new < g.l) | ((g.l == 0) & (l_new == 0)))
+            self.invariant_violations += int(bad.sum())
+            z = g.X[:, 2:]
+            self.constraint_violations += int(np.sum(np.any((z > m.z_bounds[1] + 1e-7) |
+                                                            (z < m.z_bounds[0] - 1e-7), axis=1)))
+            g.l = l_new
+            speed = np.linalg.norm(g.X[:, 2:4], axis=1)
+            for v, sp in zip(g.ids, speed):
+                rec = self.records[v]
+                rec.speed_sum += float(sp)
+                rec.steps += 1
+        ms_ctl = (time.perf_counter() - tc) * 1e3
+        self.t += 1
+        t_next = self.t * s.Ts
+        # arrivals
+        for c, g in self.groups.items():
+            if not g.ids:
+                continue
+            done = np.array([k == len(W) - 1 for k, W in zip(g.k, g.W)]) & (g.l == 0)
+            for v in [v for v, d in zip(g.ids, done) if d]:
+                self.records[v].arrived_s = t_next
+                self.world.finish(v)
+            if done.any():
+                g.remove(done)
+        # admissions (condition (12)) against the claims of the vehicles now in the network
+        admitted = self._admit(t_next)
+        # monitor and world
+        tw = time.perf_counter()
+        cur = self._fleet(with_requests=False)
+        if cur is not None:
+            pos = np.vstack([g.X[:, :2] for g in self.groups.values() if g.ids])
+            ms = self.monitor.step(cur.ids, pos, cur.heading, cur.length, cur.width,
+                                   claims=self.tm.claims(cur))
+            self.world.push(list(cur.ids), pos, cur.heading)
+            if np.isfinite(ms.min_separation) and ms.closest_pair:
+                for v in ms.closest_pair:
+                    r = self.records[v]
+                    r.closest_m = min(r.closest_m, ms.min_separation)
+            row.update(footprint_overlaps=ms.footprint_overlaps, claim_violations=ms.claim_violations,
+                       min_separation_m=ms.min_separation)
+        for pair in self.world.step():
+            self.collisions_world.add(tuple(sorted(pair)))
+        row.update(active=0 if cur is None else len(cur.ids), requests=n_req, grants=n_go,
+                   denials=n_req - n_go, admitted=admitted, tm_ms=round(ms_tm, 4),
+                   controller_ms=round(ms_ctl, 4), world_ms=round((time.perf_counter() - tw) * 1e3, 4))
+        self.step_rows.append(row)
+        return row
+
+    def _admit(self, t_s: float) -> int:
+        ready = [sp for sp in self.pending if sp.depart_s <= t_s + 1e-9]
+        if not ready:
+            return 0
+        cur = self._fleet(with_requests=False)
+        cand = FleetState(
+            ids=[sp.id for sp in ready], family=np.array([sp.vclass for sp in ready]),
+            centre=np.array([sp.waypoints[0] for sp in ready]), index=np.zeros(len(ready), dtype=np.intp),
+            heading=np.array([_headings(np.asarray(sp.waypoints))[0] for sp in ready]),
+            length=np.array([self.classes[sp.vclass].length for sp in ready]),
+            width=np.array([self.classes[sp.vclass].width for sp in ready]))
+        if cur is None:  # empty network: an empty state
+            cur = FleetState(ids=[], family=np.array([], dtype=str), centre=np.zeros((0, 2)),
+                             index=np.zeros(0, dtype=np.intp), heading=np.zeros(0), length=np.zeros(0),
+                             width=np.zeros(0))
+        ok = self.tm.admit(cur, cand)
+        n = 0
+        for sp, a in zip(ready, ok):
+            if not a:
+                continue
+            g = self.groups[sp.vclass]
+            W = np.asarray(sp.waypoints, dtype=float)
+            x0 = g.vclass.model.equilibrium(W[0])
+            g.add(sp.id, W, _headings(W), x0, int(g.ctl.index(x0[None], W[:1])[0]))
+            self.records[sp.id].admitted_s = t_s
+            self.world.insert(sp, g.vclass)
+            self.pending.remove(sp)
+            n += 1
+        return n
+
+    # -------------------------------------------------------------- run
+    @property
+    def done(self) -> bool:
+        return not self.pending and not any(g.ids for g in self.groups.values())
+
+    def run(self, max_steps: int, progress=None) -> None:
+        """Step until every vehicle has arrived, ``duration_s`` or ``max_steps``."""
+        if self.t == 0:
+            self._admit(0.0)
+        limit = max_steps
+        if self.settings.duration_s is not None:
+            limit = min(limit, int(round(self.settings.duration_s / self.settings.Ts)))
+        while self.t < limit and not self.done:
+            self.step()
+            if progress is not None:
+                progress(self)
