@@ -246,3 +246,27 @@ def test_user_sumocfg_with_trips_flows_and_additional_vtypes(grid_net, tmp_path)
         assert demand.by_id()["f.1"].length == 6.5 and demand.by_id()["f.1"].edges[-1] == e2
         drive(sim, net, demand.by_id()["f.0"], delta=3.0)
         assert sim.vehicle_info("f.0").type_id == "van"
+
+
+def test_crossing_on_a_junction_is_a_junction_collision(grid_net):
+    """SUMO is the judge inside junctions too (--collision.check-junctions)."""
+    net = load_net(grid_net)
+    ra, rb = net.route(["A1B1", "B1C1"], 0.5), net.route(["B0B1", "B1B2"], 0.5)  # east- and north-bound
+    d = np.hypot(*(ra.waypoints[:, None, :] - rb.waypoints[None, :, :]).transpose(2, 0, 1))
+    ka, kb = np.unravel_index(np.argmin(d), d.shape)  # where the two paths cross
+    assert ra.lane_ids[ka].startswith(":") and rb.lane_ids[kb].startswith(":")
+    a = PlannedVehicle("A", "DEFAULT_VEHTYPE", 0.0, ra.edges, None, None, "passenger", 5.0, 1.8)
+    b = PlannedVehicle("B", "DEFAULT_VEHTYPE", 0.0, rb.edges, None, None, "passenger", 5.0, 1.8)
+    with SumoAdapter() as sim:
+        sim.start(net=grid_net)
+        for v, r in ((a, ra), (b, rb)):
+            xy, ang = pose_at(r, 0, 5.0)
+            sim.admit(v, xy, ang)
+        sim.step()
+        for i in range(1, 31):
+            ia, ib = round(i / 30 * ka), round(i / 30 * kb)
+            (xa, aa), (xb, ab) = pose_at(ra, ia, 5.0), pose_at(rb, ib, 5.0)
+            sim.move(["A", "B"], np.stack([xa, xb]), [aa, ab])
+            sim.step()
+        events = sim.collisions()
+    assert len(events) == 1 and events[0].pair == ("A", "B") and events[0].kind == "junction"
