@@ -59,6 +59,7 @@ __all__ = [
     "CHECKS",
     "SWITCHING",
     "DISTURBANCES",
+    "VCLASS_TO_CLASS",
     "builtin_scenarios",
     "load_scenario",
     "materialise",
@@ -72,6 +73,10 @@ CHECKS = ("union", "timed")
 SWITCHING = ("terminal", "early")
 DISTURBANCES = ("none", "random", "adversarial")
 NET_TYPES = ("grid",)
+#: Default muvsim class of SUMO vClasses (vTypes not mapped in ``[vtype_classes]``).
+VCLASS_TO_CLASS = {"passenger": "car", "private": "car", "taxi": "car", "evehicle": "car", "authority": "car",
+                   "emergency": "car", "bus": "bus", "coach": "bus", "truck": "truck", "trailer": "truck",
+                   "delivery": "truck"}
 
 
 class ScenarioError(ValueError):
@@ -293,6 +298,30 @@ class Scenario:
                 raise _fail(s, f"vtype_classes.{vtype}",
                             f"unknown vehicle class; valid classes: {', '.join(sorted(self.classes))}", cls)
 
+    def class_for(self, vtype_id: str, vclass: str = "passenger") -> str:
+        """The muvsim class of a SUMO vType.
+
+        ``vtype_classes`` first, then a vType named like a class, then by
+        SUMO vClass (:data:`VCLASS_TO_CLASS`: passenger-like -> car, bus and
+        coach -> bus, truck, trailer and delivery -> truck).
+
+        Raises
+        ------
+        ScenarioError
+            None of these applies.
+        """
+        explicit = dict(self.vtype_classes)
+        if vtype_id in explicit:
+            return explicit[vtype_id]
+        if vtype_id in self.classes:
+            return vtype_id
+        cls = VCLASS_TO_CLASS.get(vclass)
+        if cls is not None and cls in self.classes:
+            return cls
+        raise _fail(self.source, f"vtype_classes.{vtype_id}",
+                    f"vType {vtype_id!r} (vClass {vclass!r}) has no muvsim class: map it in [vtype_classes] "
+                    f"to one of {', '.join(sorted(self.classes))}")
+
     @property
     def class_of_vtype(self) -> dict[str, str]:
         """vType id -> vehicle class: ``vtype_classes``, and for generated demand the identity."""
@@ -410,7 +439,8 @@ def load_scenario(name_or_path: str | os.PathLike, *, classes: Collection[str] |
     if text.endswith(".sumocfg"):
         cfg = read_sumocfg(path)
         return Scenario(name=cfg.path.stem, sumocfg=cfg.path, classes=allowed, source=None)
-    if path.suffix == ".toml" or os.sep in text or path.exists():
+    builtin = path.suffix != ".toml" and os.sep not in text and text in builtin_scenarios()
+    if not builtin and (path.suffix == ".toml" or os.sep in text or path.exists()):
         if not path.is_file():
             raise ScenarioError(f"{path}: scenario file does not exist")
         try:

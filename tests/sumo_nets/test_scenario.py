@@ -120,6 +120,12 @@ def test_missing_tables_and_bad_toml(tmp_path):
         load_scenario("nope")
 
 
+def test_builtin_names_win_over_same_named_directories(tmp_path, monkeypatch):
+    (tmp_path / "grid").mkdir()
+    monkeypatch.chdir(tmp_path)
+    assert load_scenario("grid").name == "grid"
+
+
 def test_materialise_is_cached(tmp_path):
     s = load_scenario(write(tmp_path, GOOD))
     files = materialise(s, tmp_path / "work")
@@ -154,6 +160,11 @@ def test_read_sumocfg_resolves_relative_paths(tmp_path):
     s = load_scenario(scen)
     assert s.sumocfg == cfg_path.resolve() and s.net is None and s.class_of_vtype == {"DEFAULT_VEHTYPE": "car"}
     assert load_scenario(cfg_path).sumocfg == cfg_path.resolve()
+    assert s.class_for("DEFAULT_VEHTYPE") == "car"
+    assert (s.class_for("myBus", "bus"), s.class_for("lorry", "trailer"), s.class_for("truck", "bus")) == (
+        "bus", "truck", "truck")
+    with pytest.raises(ScenarioError, match=r"s\.toml: vtype_classes\.boat: vType 'boat' \(vClass 'ship'\)"):
+        s.class_for("boat", "ship")
     assert materialise(s, tmp_path).net == cfg.net
 
 
