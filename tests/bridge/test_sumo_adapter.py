@@ -270,3 +270,17 @@ def test_crossing_on_a_junction_is_a_junction_collision(grid_net):
             sim.step()
         events = sim.collisions()
     assert len(events) == 1 and events[0].pair == ("A", "B") and events[0].kind == "junction"
+
+
+def test_sumo_dying_mid_run_is_a_sumo_error_and_close_survives(grid_cfg):
+    with SumoAdapter(backend="traci") as sim:
+        sim.start(grid_cfg)
+        sim.step()
+        sim._api._process.kill()  # SUMO dies under us
+        sim._api._process.wait()
+        with pytest.raises(SumoError, match="SUMO failed in"):
+            for _ in range(3):
+                sim.step()
+        sim.close()
+        sim.close()
+    assert not sim.running
