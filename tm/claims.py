@@ -22,7 +22,7 @@ import numpy as np
 
 from controllers.tolerances import GEOMETRY_TOL
 from tm.families import FamilyTable
-from tm.geometry import broad_phase, intersect_sat, minkowski_sum, rectangles
+from tm.geometry import broad_phase, intersect_sat_indexed, minkowski_sum, rectangles
 
 __all__ = ["Claims", "claim_conflicts", "conflicting_pairs", "CHECK_KINDS"]
 
@@ -130,8 +130,7 @@ def claim_conflicts(claims: Claims, i, j, check: str = "union", tol: float = GEO
         return np.zeros(0, dtype=bool)
     if check == "union":
         uniq, inv = np.unique(np.concatenate([i, j]), return_inverse=True)
-        polys = claims.polygons(uniq)
-        return intersect_sat(polys[inv[:p]], polys[inv[p:]], tol)
+        return intersect_sat_indexed(claims.polygons(uniq), inv[:p], inv[p:], tol)
     out = np.zeros(p, dtype=bool)
     kmax = np.maximum(np.maximum(claims.index[i], claims.index[j]), 1)
     active = np.arange(p)
@@ -140,9 +139,8 @@ def claim_conflicts(claims: Claims, i, j, check: str = "union", tol: float = GEO
         if len(active) == 0:
             break
         uniq, inv = np.unique(np.concatenate([i[active], j[active]]), return_inverse=True)
-        polys = claims.polygons_at(k, uniq)
         n = len(active)
-        hit = intersect_sat(polys[inv[:n]], polys[inv[n:]], tol)
+        hit = intersect_sat_indexed(claims.polygons_at(k, uniq), inv[:n], inv[n:], tol)
         out[active[hit]] = True          # early exit: a conflicting pair is decided
         active = active[~hit]
     return out

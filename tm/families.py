@@ -87,14 +87,13 @@ class FamilyTable:
             if arr.size and (arr.min() < 0 or arr.max() >= len(self.keys)):
                 raise FamilyError(f"family index out of range [0, {len(self.keys)})")
             return arr.astype(np.intp)
-        if arr.size == 0:
-            return np.zeros(0, dtype=np.intp)
-        uniq, inv = np.unique(arr.astype(str), return_inverse=True)
-        lookup = {k: f for f, k in enumerate(self.keys)}
-        bad = [u for u in uniq if u not in lookup]
-        if bad:
+        out = np.full(arr.shape, -1, dtype=np.intp)
+        for f, key in enumerate(self.keys):          # few classes: one vectorised comparison each
+            out[arr == key] = f
+        if np.any(out < 0):
+            bad = sorted({str(k) for k in arr[out < 0].ravel()})
             raise FamilyError(f"unknown family key(s) {bad}; known: {list(self.keys)}")
-        return np.array([lookup[u] for u in uniq], dtype=np.intp)[inv.reshape(arr.shape)]
+        return out
 
     def rows(self, family: np.ndarray, index: np.ndarray) -> np.ndarray:
         """Stack rows of level ``index`` of ``family`` (indices must be in ``0..N_f``)."""

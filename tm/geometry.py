@@ -9,17 +9,18 @@ Conventions
 -----------
 * Two polygons *conflict* when their Euclidean distance is at most ``tol``
   (touching counts).  :func:`intersect_sat` decides this on the separating
-  axes (edge normals): a gap larger than ``tol`` on some edge normal proves a
-  distance larger than ``tol``; when the closest features are two vertices
-  the true distance can exceed the largest edge-normal gap, so the test is
-  conservative (it may call a pair at distance slightly above ``tol`` a
-  conflict, never the reverse).
+  axes (outward edge normals): a gap larger than ``tol`` along some normal
+  proves a distance larger than ``tol``.  When the closest features are two
+  vertices the largest normal gap is ``d cos(phi)`` (``phi`` the angle
+  between the closest-point direction and the nearest normal), so the test
+  is conservative: it may call a pair at a distance somewhat above ``tol`` a
+  conflict, never the reverse.  Disjointness itself (``tol = 0``) is exact.
 * Headings are in radians, counter-clockwise from +x.
 
 Functions
 ---------
 rectangles, minkowski_sum, aabb, edge_normals, is_convex_ccw, convex_hull,
-broad_phase, intersect_sat, polygon_distance, min_pair_distance, halfspaces,
+broad_phase, support_normals, intersect_sat, intersect_sat_indexed, polygon_distance, min_pair_distance, halfspaces,
 lp_depth, intersect_lp, check_all_pairs_lp.
 """
 
@@ -32,8 +33,8 @@ from controllers.tolerances import GEOMETRY_TOL
 
 __all__ = [
     "rectangles", "minkowski_sum", "aabb", "edge_normals", "is_convex_ccw", "convex_hull",
-    "broad_phase", "intersect_sat", "polygon_distance", "min_pair_distance",
-    "halfspaces", "lp_depth", "intersect_lp", "check_all_pairs_lp",
+    "broad_phase", "support_normals", "intersect_sat", "intersect_sat_indexed", "polygon_distance",
+    "min_pair_distance", "halfspaces", "lp_depth", "intersect_lp", "check_all_pairs_lp",
 ]
 
 _EMPTY_PAIRS = (np.zeros(0, dtype=np.intp), np.zeros(0, dtype=np.intp))
@@ -70,7 +71,8 @@ def rectangles(heading, length, width) -> np.ndarray:
 
 
 def _edges(P: np.ndarray) -> np.ndarray:
-    return np.roll(P, -1, axis=-2) - P
+    """Edge vectors ``P[t+1] - P[t]`` (cyclic); slicing, as np.roll is slow on small arrays."""
+    return np.concatenate([P[..., 1:, :], P[..., :1, :]], axis=-2) - P
 
 
 def minkowski_sum(P, Q) -> np.ndarray:
@@ -95,22 +97,20 @@ def minkowski_sum(P, Q) -> np.ndarray:
     P = np.asarray(P, dtype=float)
     Q = np.asarray(Q, dtype=float)
     lead = np.broadcast_shapes(P.shape[:-2], Q.shape[:-2])
-    P = np.broadcast_to(P, lead + P.shape[-2:])
-    Q = np.broadcast_to(Q, lead + Q.shape[-2:])
-    E = np.concatenate([_edges(P), _edges(Q)], axis=-2)
+    k, m = P.shape[-2], Q.shape[-2]
+    P = np.broadcast_to(P, lead + P.shape[-2:]).reshape(-1, k, 2)
+    Q = np.broadcast_to(Q, lead + Q.shape[-2:]).reshape(-1, m, 2)
+    E = np.concatenate([_edges(P), _edges(Q)], axis=1)
     ang = np.arctan2(E[..., 1], E[..., 0])
-    ang = np.where(ang < 0, ang + 2 * np.pi, ang)
+    ang += (ang < 0) * (2 * np.pi)
     ang[(E[..., 0] == 0) & (E[..., 1] == 0)] = np.inf        # zero edges: last, no effect
-    k = P.shape[-2]
-    start = (np.take_along_axis(P, np.argmin(ang[..., :k], axis=-1)[..., None, None], axis=-2)
-             + np.take_along_axis(Q, np.argmin(ang[..., k:], axis=-1)[..., None, None], axis=-2))
-    order = np.argsort(ang, axis=-1, kind="stable")
-    E = np.take_along_axis(E, order[..., None], axis=-2)
-    out = np.empty_like(E)
-    out[..., :1, :] = start
-    np.cumsum(E[..., :-1, :], axis=-2, out=out[..., 1:, :])
-    out[..., 1:, :] += start
-    return out
+    rows = np.arange(len(E))
+    start = P[rows, np.argmin(ang[:, :k], axis=1)] + Q[rows, np.argmin(ang[:, k:], axis=1)]
+    E = E[rows[:, None], np.argsort(ang, axis=1)]
+    out = np.cumsum(E, axis=1)
+    out -= E                                                 # exclusive sums: vertex t = start + e_0..e_{t-1}
+    out += start[:, None, :]
+    return out.reshape(lead + (k + m, 2))
 
 
 def aabb(P) -> tuple[np.ndarray, np.ndarray]:
@@ -122,9 +122,9 @@ def aabb(P) -> tuple[np.ndarray, np.ndarray]:
 def edge_normals(P) -> np.ndarray:
     """Unit outward normals of the edges of CCW polygons (zero for zero-length edges)."""
     E = _edges(np.asarray(P, dtype=float))
-    N = np.stack([E[..., 1], -E[..., 0]], axis=-1)
-    norm = np.linalg.norm(N, axis=-1, keepdims=True)
-    return np.divide(N, norm, out=np.zeros_like(N), where=norm > 0)
+    norm = np.hypot(E[..., 0], E[..., 1])
+    inv = np.divide(1.0, norm, out=np.zeros_like(norm), where=norm > 0)
+    return np.stack([E[..., 1] * inv, -E[..., 0] * inv], axis=-1)
 
 
 def is_convex_ccw(P, tol: float = GEOMETRY_TOL) -> bool:
@@ -188,7 +188,7 @@ def broad_phase(lo, hi, tol: float = GEOMETRY_TOL, mask=None, cell: float | None
     each cell and kept only in the cell that holds the corner
     ``max(lo_i, lo_j)`` of their intersection, so each overlapping pair is
     reported once.  Cost is ``O(n log n)`` plus the number of pairs sharing a
-    cell.
+    cell (with ``mask``: pairs sharing a cell with a masked box).
 
     Parameters
     ----------
@@ -207,8 +207,8 @@ def broad_phase(lo, hi, tol: float = GEOMETRY_TOL, mask=None, cell: float | None
     i, j : ndarray of int, shape (p,)
         Indices with ``i < j``, sorted by ``(i, j)``.
     """
-    lo = np.asarray(lo, dtype=float) - 0.5 * tol
-    hi = np.asarray(hi, dtype=float) + 0.5 * tol
+    lo = np.asarray(lo, dtype=float)
+    hi = np.asarray(hi, dtype=float)
     n = len(lo)
     if n < 2:
         return _EMPTY_PAIRS
@@ -216,39 +216,62 @@ def broad_phase(lo, hi, tol: float = GEOMETRY_TOL, mask=None, cell: float | None
         mask = np.asarray(mask, dtype=bool)
         if not mask.any():
             return _EMPTY_PAIRS
-    origin = lo.min(axis=0)
-    extent = (hi - lo).max(axis=1)
-    h = float(cell) if cell is not None else max(float(np.median(extent)), 1e-6)
-    span = float((hi.max(axis=0) - origin).max())
+    # contiguous 1-D coordinates: reductions over (n, 2) along axis 0 are slow
+    x0, y0 = lo[:, 0] - 0.5 * tol, lo[:, 1] - 0.5 * tol
+    x1, y1 = hi[:, 0] + 0.5 * tol, hi[:, 1] + 0.5 * tol
+    ox, oy = x0.min(), y0.min()
+    if cell is not None:
+        h = float(cell)
+    else:
+        ext = np.maximum(x1 - x0, y1 - y0)
+        h = max(float(np.partition(ext, n // 2)[n // 2]), 1e-6)      # (upper) median extent
+    span = max(x1.max() - ox, y1.max() - oy)
     while True:
-        c0 = np.floor((lo - origin) / h).astype(np.int64)
-        c1 = np.floor((hi - origin) / h).astype(np.int64)
-        nx = c1[:, 0] - c0[:, 0] + 1
-        ny = c1[:, 1] - c0[:, 1] + 1
+        inv = 1.0 / h                    # one cell formula for boxes and corners: floor((v - o) * inv)
+        cx0 = np.floor((x0 - ox) * inv).astype(np.int64)
+        cy0 = np.floor((y0 - oy) * inv).astype(np.int64)
+        nx = np.floor((x1 - ox) * inv).astype(np.int64) - cx0 + 1
+        ny = np.floor((y1 - oy) * inv).astype(np.int64) - cy0 + 1
         cnt = nx * ny
-        if cell is not None or cnt.sum() <= 8 * n or h > span:
+        total = int(cnt.sum())
+        if cell is not None or total <= 8 * n or h > span:
             break
         h *= 2.0
-    box, local = _pair_ranges(np.zeros(n, dtype=np.int64), cnt)
-    cx = c0[box, 0] + local % nx[box]
-    cy = c0[box, 1] + local // nx[box]
-    width = int(c1[:, 1].max()) + 1
-    key = cx * width + cy
-    order = np.argsort(key, kind="stable")
-    key, box = key[order], box[order]
+    width = int((cy0 + ny).max()) + 1
+    if total == n:                                   # every box in one cell
+        box = np.arange(n)
+        key = cx0 * width + cy0
+    else:
+        box, local = _pair_ranges(np.zeros(n, dtype=np.int64), cnt)
+        nxb = nx[box]
+        key = (cx0[box] + local % nxb) * width + cy0[box] + local // nxb
     m = len(key)
-    new_group = np.flatnonzero(np.diff(key)) + 1
-    group_end = np.repeat(np.append(new_group, m), np.diff(np.concatenate([[0], new_group, [m]])))
-    p, q = _pair_ranges(np.arange(1, m + 1), group_end - np.arange(m) - 1)
+    if int(key.max()) < (1 << 62) // m:              # sort packed (key, entry): much faster than argsort
+        packed = np.sort(key * m + np.arange(m))
+        key, box = packed // m, box[packed % m]
+    else:
+        order = np.argsort(key)
+        key, box = key[order], box[order]
+    bounds = np.flatnonzero(key[1:] != key[:-1]) + 1
+    sizes = np.diff(np.concatenate(([0], bounds, [m])))
+    group_end = np.repeat(np.concatenate((bounds, [m])), sizes)
+    if mask is None:
+        p, q = _pair_ranges(np.arange(1, m + 1), group_end - np.arange(m) - 1)
+    else:                                            # pairs (masked entry, any other entry of its cell)
+        group_start = group_end - np.repeat(sizes, sizes)
+        src = np.flatnonzero(mask[box])
+        p, q = _pair_ranges(group_start[src], group_end[src] - group_start[src])
+        p = src[p]
+        keep = (p != q) & (~mask[box[q]] | (p < q))   # a masked-masked pair once
+        p, q = p[keep], q[keep]
     bi, bj = box[p], box[q]
     keep = bi != bj
-    if mask is not None:
-        keep &= mask[bi] | mask[bj]
     bi, bj, cell_key = bi[keep], bj[keep], key[p[keep]]
-    corner = np.maximum(lo[bi], lo[bj])
-    oc = np.floor((corner - origin) / h).astype(np.int64)
-    keep = (oc[:, 0] * width + oc[:, 1] == cell_key)
-    keep &= np.all(np.minimum(hi[bi], hi[bj]) >= corner, axis=1)
+    cx = np.maximum(x0[bi], x0[bj])
+    cy = np.maximum(y0[bi], y0[bj])
+    owner = np.floor((cx - ox) * inv).astype(np.int64) * width + np.floor((cy - oy) * inv).astype(np.int64)
+    keep = owner == cell_key
+    keep &= (np.minimum(x1[bi], x1[bj]) >= cx) & (np.minimum(y1[bi], y1[bj]) >= cy)
     bi, bj = bi[keep], bj[keep]
     i, j = np.minimum(bi, bj), np.maximum(bi, bj)
     order = np.lexsort((j, i))
@@ -262,8 +285,33 @@ def _chunks(n: int, per_item: int):
         yield slice(s, min(n, s + step))
 
 
+def support_normals(P) -> tuple[np.ndarray, np.ndarray]:
+    """Unit edge normals ``N`` of polygons ``(n, k, 2)`` and their supports ``h = max_v N·v``.
+
+    ``{x : N_e · x <= h_e}`` is a supporting half-plane of the polygon for
+    every row, even for a round-off edge whose direction is arbitrary (zero
+    normals give the trivial row ``0 <= 0``).
+    """
+    P = np.asarray(P, dtype=float)
+    N = edge_normals(P)
+    return N, (N @ P.swapaxes(-1, -2)).max(axis=-1)
+
+
+def _separated(NP, hP, P, NQ, hQ, Q, tol: float) -> np.ndarray:
+    """Some half-plane of one polygon has the other beyond it by more than ``tol``."""
+    g1 = (NP @ Q.swapaxes(-1, -2)).min(axis=-1) - hP            # (c, k): gap of Q beyond P's edges
+    g2 = (NQ @ P.swapaxes(-1, -2)).min(axis=-1) - hQ
+    return (g1 > tol).any(axis=-1) | (g2 > tol).any(axis=-1)
+
+
 def intersect_sat(P, Q, tol: float = GEOMETRY_TOL) -> np.ndarray:
     """Separating-axis test of paired convex polygons.
+
+    The candidate axes are the outward edge normals of both polygons (for
+    convex polygons these suffice: they are the edge normals of
+    ``P ⊕ (-Q)``).  Pair ``t`` is separated when, along a normal ``n`` of
+    one polygon, the other lies beyond that polygon's support ``h(n)`` by
+    more than ``tol``.
 
     Parameters
     ----------
@@ -271,8 +319,7 @@ def intersect_sat(P, Q, tol: float = GEOMETRY_TOL) -> np.ndarray:
     Q : array_like, shape (n, m, 2)
         CCW convex polygons; pair ``t`` is ``(P[t], Q[t])``.
     tol : float
-        A pair conflicts unless some edge normal separates it by more than
-        ``tol`` (touching counts as conflict).
+        Touching (within ``tol``) counts as conflict.
 
     Returns
     -------
@@ -283,13 +330,26 @@ def intersect_sat(P, Q, tol: float = GEOMETRY_TOL) -> np.ndarray:
     Q = np.asarray(Q, dtype=float)
     n, k, m = P.shape[0], P.shape[1], Q.shape[1]
     out = np.empty(n, dtype=bool)
-    for sl in _chunks(n, (k + m) * (k + m + 2)):
+    for sl in _chunks(n, 4 * k * m):
         p, q = P[sl], Q[sl]
-        axes = np.concatenate([edge_normals(p), edge_normals(q)], axis=1)      # (c, a, 2)
-        pp = axes @ p.transpose(0, 2, 1)                                       # (c, a, k)
-        qq = axes @ q.transpose(0, 2, 1)
-        gap = np.maximum(qq.min(axis=2) - pp.max(axis=2), pp.min(axis=2) - qq.max(axis=2))
-        out[sl] = ~np.any(gap > tol, axis=1)
+        out[sl] = ~_separated(*support_normals(p), p, *support_normals(q), q, tol)
+    return out
+
+
+def intersect_sat_indexed(polys, i, j, tol: float = GEOMETRY_TOL) -> np.ndarray:
+    """:func:`intersect_sat` of the pairs ``(polys[i[t]], polys[j[t]])``.
+
+    Normals and supports are computed once per polygon, not once per pair.
+    """
+    polys = np.asarray(polys, dtype=float)
+    i = np.asarray(i, dtype=np.intp)
+    j = np.asarray(j, dtype=np.intp)
+    N, h = support_normals(polys)
+    k = polys.shape[1]
+    out = np.empty(len(i), dtype=bool)
+    for sl in _chunks(len(i), 4 * k * k):
+        a, b = i[sl], j[sl]
+        out[sl] = ~_separated(N[a], h[a], polys[a], N[b], h[b], polys[b], tol)
     return out
 
 
@@ -325,8 +385,8 @@ def polygon_distance(P, Q) -> np.ndarray:
     out = np.empty(n)
     for sl in _chunks(n, 6 * k * m):
         p, q = P[sl], Q[sl]
-        d = np.minimum(_point_segment_distance(p, q, np.roll(q, -1, axis=1)).min(axis=(1, 2)),
-                       _point_segment_distance(q, p, np.roll(p, -1, axis=1)).min(axis=(1, 2)))
+        d = np.minimum(_point_segment_distance(p, q, q + _edges(q)).min(axis=(1, 2)),
+                       _point_segment_distance(q, p, p + _edges(p)).min(axis=(1, 2)))
         d[intersect_sat(p, q, 0.0)] = 0.0
         out[sl] = d
     return out

@@ -78,12 +78,34 @@ def propagate_stops(stopped, leq) -> np.ndarray:
         stopped[leq[add, 0]] = True
 
 
-def _enumerate(n: int, leq: np.ndarray, excl: np.ndarray, w: np.ndarray) -> np.ndarray:
-    bits = ((np.arange(1 << n)[:, None] >> np.arange(n)) & 1).astype(bool)      # (2^n, n)
-    bad = np.any(bits[:, leq[:, 0]] & ~bits[:, leq[:, 1]], axis=1)
-    bad |= np.any(bits[:, excl[:, 0]] & bits[:, excl[:, 1]], axis=1)
-    score = np.where(bad, -np.inf, bits @ w)
-    return bits[int(np.argmax(score))]
+def _mark(bad: np.ndarray, comp: np.ndarray, violated: np.ndarray) -> None:
+    """``bad[c] |= OR of violated[:, e]`` over the edges ``e`` of component ``c``."""
+    order = np.argsort(comp, kind="stable")
+    starts = np.flatnonzero(np.diff(np.concatenate([[-1], comp[order]])))
+    bad[comp[order][starts]] |= np.logical_or.reduceat(violated.T[order], starts, axis=0)
+
+
+def _enumerate(size: int, nodes: np.ndarray, leq: np.ndarray, excl: np.ndarray, w: np.ndarray,
+               local: np.ndarray) -> np.ndarray:
+    """Best Go rows for ``C`` components of ``size`` nodes each, all at once.
+
+    ``nodes (C, size)`` lists each component's requesters, ``local`` maps a
+    requester to its position in its row; ``leq``/``excl`` rows are global
+    requester indices of these components' edges.  All ``2^size`` assignments
+    of every component are scored in one ``(C, 2^size)`` array; infeasible
+    ones get ``-inf`` (all-Stop is always feasible).
+    """
+    C = len(nodes)
+    bits = ((np.arange(1 << size)[:, None] >> np.arange(size)) & 1).astype(bool)      # (2^s, s)
+    comp = np.full(int(nodes.max()) + 1, -1, dtype=np.intp)
+    comp[nodes] = np.arange(C)[:, None]
+    bad = np.zeros((C, 1 << size), dtype=bool)
+    if len(leq):
+        _mark(bad, comp[leq[:, 0]], bits[:, local[leq[:, 0]]] & ~bits[:, local[leq[:, 1]]])
+    if len(excl):
+        _mark(bad, comp[excl[:, 0]], bits[:, local[excl[:, 0]]] & bits[:, local[excl[:, 1]]])
+    score = np.where(bad, -np.inf, w[nodes] @ bits.T)
+    return bits[np.argmax(score, axis=1)]                                             # (C, s)
 
 
 def _milp(n: int, leq: np.ndarray, excl: np.ndarray, w: np.ndarray, time_limit: float):
@@ -117,7 +139,8 @@ def select_optimal(n: int, fixed_hits, leq, excl, weights, rng: np.random.Genera
         ``u_i / (2 n)``, ``u_i ~ U[0, 1)``, which sums to less than 1 and so
         never changes an integer optimum.
     rng : numpy.random.Generator
-        Draws exactly ``n`` numbers per call.
+        Draws ``n`` numbers per call (plus the greedy tie-breaks of a MILP
+        fallback), so a seeded generator gives reproducible decisions.
 
     Returns
     -------
@@ -138,23 +161,32 @@ def select_optimal(n: int, fixed_hits, leq, excl, weights, rng: np.random.Genera
     ncomp, label = connected_components(
         coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n)), directed=False)
     sizes = np.bincount(label, minlength=ncomp)
-    comp_of_edge = label[edges[:, 0]]
-    order = np.argsort(comp_of_edge, kind="stable")
-    bounds = np.searchsorted(comp_of_edge[order], np.arange(ncomp + 1))
+    by_comp = np.argsort(label, kind="stable")                   # requesters grouped by component
+    first = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+    local = np.empty(n, dtype=np.intp)
+    local[by_comp] = np.arange(n) - np.repeat(first, sizes)       # position within its component
+    edge_size = sizes[label[edges[:, 0]]]
     n_leq = len(leq)
-    for comp in np.flatnonzero(sizes > 1):
-        nodes = np.flatnonzero(label == comp)
-        local = np.full(n, -1, dtype=np.intp)
-        local[nodes] = np.arange(len(nodes))
-        ids = order[bounds[comp]:bounds[comp + 1]]
-        cl = local[edges[ids[ids < n_leq]]]
-        ce = local[edges[ids[ids >= n_leq]]]
-        cw = w[nodes]
-        if len(nodes) <= exhaustive_max:
-            sol = _enumerate(len(nodes), cl, ce, cw)
-        else:
-            sol = _milp(len(nodes), cl, ce, cw, milp_time_limit)
-            if sol is None or not feasible(sol, np.zeros(len(nodes)), cl, ce):
-                sol = select_greedy(len(nodes), np.zeros(len(nodes), dtype=np.intp), cl, ce, rng)
-        go[nodes] = sol
+    for size in np.unique(sizes[sizes > 1]):
+        comps = np.flatnonzero(sizes == size)
+        nodes = by_comp[first[comps][:, None] + np.arange(size)]   # (C, size)
+        sel = edge_size == size
+        cl, ce = edges[:n_leq][sel[:n_leq]], edges[n_leq:][sel[n_leq:]]
+        if size <= exhaustive_max:
+            # bound the (C, 2^size) work arrays by chunking components
+            step = max(1, (1 << 22) // ((1 << size) * max(size * size, 1)))
+            for s0 in range(0, len(comps), step):
+                chunk = nodes[s0:s0 + step]
+                inside = np.zeros(n, dtype=bool)
+                inside[chunk.ravel()] = True
+                go[chunk] = _enumerate(int(size), chunk, cl[inside[cl[:, 0]]], ce[inside[ce[:, 0]]], w, local)
+            continue
+        for row in nodes:                                          # large components: one MILP each
+            inside = np.zeros(n, dtype=bool)
+            inside[row] = True
+            ml, me = local[cl[inside[cl[:, 0]]]], local[ce[inside[ce[:, 0]]]]
+            sol = _milp(int(size), ml, me, w[row], milp_time_limit)
+            if sol is None or not feasible(sol, np.zeros(int(size)), ml, me):
+                sol = select_greedy(int(size), np.zeros(int(size), dtype=np.intp), ml, me, rng)
+            go[row] = sol
     return go
