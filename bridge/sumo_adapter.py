@@ -33,6 +33,24 @@ its lane (measured: up to ~0.8 m on junction curves, the whole offset inside
 a lane change); ``lateral_resolution`` (e.g. 0.4 m) turns the sublane model
 on and SUMO then keeps the exact position, at about twice the step cost.
 
+A co-simulation loop, in outline::
+
+    with SumoAdapter() as sim:
+        demand = sim.start(files.sumocfg, tripinfo_path=out / "tripinfo.xml", seed=seed)
+        queue, net = DepartureQueue(demand), load_net(files.net)
+        waiting = []
+        while sim.sim_time() < duration:
+            waiting += queue.release(sim.sim_time())
+            for v in admitted_by_the_tm(waiting):           # tubes free (design.md 3f)
+                r = net.route(v.edges, delta, vclass=v.vclass, vehicle_id=v.id)
+                sim.admit(v, front_bumper(r.waypoints[0], r.heading[0], v.length),
+                          sumo_angle(r.heading[0]), depart_lane=r.depart_lane_index)
+            ... controllers, TM, plant step ...
+            sim.move(ids, front_bumper(centres, headings, lengths), sumo_angle(headings))
+            for vid in done: sim.finish(vid)
+            sim.step()
+            judged = sim.collisions()                       # must stay empty
+
 Failures.  Every error SUMO raises (``TraCIException``,
 ``FatalTraCIError``) becomes :class:`SumoError` with SUMO's message.  libsumo
 crashes the whole process on some malformed inputs (a broken network XML
@@ -291,7 +309,13 @@ class SumoAdapter:
         vtypes = wd / "vtypes.rou.xml"
         vtypes.write_text(demand.vtypes_xml(), encoding="utf-8")
 
-        home = _sumo_home()
+        from sumo_nets.sumo_tools import SumoToolError
+
+        try:
+            home = _sumo_home()
+        except SumoToolError as exc:
+            self._cleanup_tmp()
+            raise SumoError(str(exc)) from None
         exe = home / "bin" / ("sumo-gui" if gui else "sumo")
         if not exe.is_file():
             found = shutil.which(exe.name)
