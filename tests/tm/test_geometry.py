@@ -16,6 +16,7 @@ from controllers.tolerances import GEOMETRY_TOL
 from tests.tm.helpers import box, random_convex
 from tm.families import pad_polygons
 from tm.geometry import (aabb, broad_phase, check_all_pairs_lp, convex_hull, intersect_lp, intersect_sat,
+                         intersect_sat_indexed,
                          is_convex_ccw, lp_depth, min_pair_distance, minkowski_sum, polygon_distance, rectangles)
 
 seeds = st.integers(0, 2**32 - 1)
@@ -73,6 +74,30 @@ def test_sat_agrees_with_lp_on_random_convex_polygons(seed):
         depth = lp_depth(p, q)
         if abs(depth) > 1e-6:
             assert s == (depth > 0)
+
+
+@settings(max_examples=40, deadline=None)
+@given(seeds)
+def test_sat_is_not_fooled_by_round_off_edges(seed):
+    """Near-duplicate vertices (1e-13 m apart, any direction) make edges whose normals are
+    arbitrary; the one-sided test must stay sound (it uses true supports, not edge offsets).
+    Also the indexed variant must equal the paired one."""
+    rng = np.random.default_rng(seed)
+    P, Q = [], []
+    for _ in range(10):
+        for out in (P, Q):
+            X = random_convex(rng, rng.uniform(0.2, 3)) + rng.uniform(-2, 2, size=2)
+            t = int(rng.integers(len(X)))
+            X = np.insert(X, t + 1, X[t] + rng.normal(size=2) * 1e-13, axis=0)
+            out.append(X)
+    Pp, Qp = pad_polygons(P, 10), pad_polygons(Q, 10)
+    sat = intersect_sat(Pp, Qp)
+    for s, p, q in zip(sat, P, Q):
+        depth = lp_depth(p, q)
+        if abs(depth) > 1e-6:
+            assert s == (depth > 0)
+    both = np.concatenate([Pp, Qp])
+    assert np.array_equal(intersect_sat_indexed(both, np.arange(10), np.arange(10, 20)), sat)
 
 
 def test_touching_counts_as_conflict_and_a_gap_does_not():
