@@ -5,7 +5,7 @@ import itertools
 import numpy as np
 from hypothesis import given, settings, strategies as st
 
-from tm.selection import propagate_stops, select_greedy, select_optimal
+from tm.selection import components, propagate_stops, select_greedy, select_optimal
 
 
 @st.composite
@@ -86,3 +86,18 @@ def test_same_rng_seed_same_tie_breaks():
                                                  np.ones(6, int), np.random.default_rng(s)))[0])
                for s in range(30)}
     assert len(winners) > 1                                       # ties are not always won by 0
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(1, 40), st.integers(0, 2**32 - 1), st.floats(0, 0.2))
+def test_components_match_networkx(n, seed, density):
+    import networkx as nx
+    rng = np.random.default_rng(seed)
+    pairs = np.array([(i, j) for i in range(n) for j in range(i + 1, n)], dtype=int).reshape(-1, 2)
+    edges = pairs[rng.random(len(pairs)) < density]
+    label = components(n, edges)
+    G = nx.Graph()
+    G.add_nodes_from(range(n))
+    G.add_edges_from(edges.tolist())
+    for comp in nx.connected_components(G):
+        assert {int(label[v]) for v in comp} == {min(comp)}
