@@ -35,7 +35,7 @@ from tm.manager import FleetState, TrafficManager
 from tm.monitor import Monitor
 from tm.settings import TMSettings
 
-__all__ = ["VehicleSpec", "CosimSettings", "World", "FreePlaneWorld", "Cosim", "VehicleRecord"]
+__all__ = ["Zone", "VehicleSpec", "CosimSettings", "World", "FreePlaneWorld", "Cosim", "VehicleRecord"]
 
 
 @dataclass(frozen=True)
@@ -50,6 +50,25 @@ class VehicleSpec:
     @property
     def route_length_m(self) -> float:
         return float(np.linalg.norm(np.diff(self.waypoints, axis=0), axis=1).sum())
+
+
+@dataclass(frozen=True)
+class Zone:
+    """A conflict zone (e.g. a junction) as an axis-aligned box ``lo <= p <= hi`` (m).
+
+    Liveness rule (the paper's traffic manager has none): a vehicle may only
+    *ask* for a switch whose new claim reaches the zone's guard region (the
+    box enlarged by the largest claim radius of any class) while it holds the
+    zone's token; the token is free or held by one vehicle, handed out in
+    order of waiting, and released once the holder's claim has left the guard.
+    Non-holders therefore never claim inside the guard, so the holder always
+    crosses the zone's core: no gridlock inside a zone.  Safety is untouched:
+    the traffic manager still checks every request.
+    """
+
+    name: str
+    lo: tuple
+    hi: tuple
 
 
 @dataclass(frozen=True)
@@ -178,7 +197,7 @@ class Cosim:
     """
 
     def __init__(self, classes, specs, settings: CosimSettings, world=None,
-                 synthesis: SynthesisSettings | None = None):
+                 synthesis: SynthesisSettings | None = None, zones: list[Zone] | None = None):
         self.settings = settings
         self.world = world or FreePlaneWorld()
         used = sorted({s.vclass for s in specs})
@@ -212,6 +231,15 @@ class Cosim:
         self.constraint_violations = 0
         self.collisions_world: set = set()
         self.last_decision = None
+        # zones: guard boxes (core enlarged by the largest claim radius), token holders, queues
+        radius = max(float(np.abs(f.position_sets[-1]).max()) + 0.5 * np.hypot(self.classes[c].length,
+                                                                              self.classes[c].width)
+                     for c, f in self.families.items()) if self.families else 0.0
+        self.zones = list(zones or [])
+        self.zone_lo = np.array([z.lo for z in self.zones], dtype=float).reshape(-1, 2) - radius
+        self.zone_hi = np.array([z.hi for z in self.zones], dtype=float).reshape(-1, 2) + radius
+        self.zone_holder: list[str | None] = [None] * len(self.zones)
+        self.zone_wait: dict[tuple[int, str], int] = {}
 
     # -------------------------------------------------------------- state
     def _fleet(self, with_requests: bool):
@@ -244,8 +272,48 @@ class Cosim:
         kw = {}
         if with_requests:
             kw = dict(requesting=cat(RQ), req_centre=np.vstack(RC), req_index=cat(RL), req_heading=cat(RH))
-        return FleetState(ids=ids, family=np.array(fam), centre=np.vstack(C), index=cat(L), heading=cat(H),
-                          length=cat(Ln), width=cat(Wd), **kw)
+        state = FleetState(ids=ids, family=np.array(fam), centre=np.vstack(C), index=cat(L), heading=cat(H),
+                           length=cat(Ln), width=cat(Wd), **kw)
+        if with_requests and self.zones:
+            state = self._gate(state)
+        return state
+
+    def _zone_hits(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+        """(V, Z) bool: claim boxes that meet zone guard boxes."""
+        return np.all((lo[:, None, :] <= self.zone_hi[None]) & (hi[:, None, :] >= self.zone_lo[None]), axis=2)
+
+    def _gate(self, state: FleetState) -> FleetState:
+        """Withhold requests into a zone guard whose token another vehicle holds (see :class:`Zone`)."""
+        cur_lo, cur_hi = self.tm.claims(state).aabb()
+        # release tokens whose holder's current claim has left the guard (or who is gone)
+        cur_hits = self._zone_hits(cur_lo, cur_hi)
+        pos = {v: i for i, v in enumerate(state.ids)}
+        for z, h in enumerate(self.zone_holder):
+            if h is not None and (h not in pos or not cur_hits[pos[h], z]):
+                self.zone_holder[z] = None
+        req = state.requesting.copy()
+        if not req.any():
+            return state
+        new = FleetState(ids=state.ids, family=state.family, centre=state.req_centre, index=state.req_index,
+                         heading=state.req_heading, length=state.length, width=state.width)
+        new_lo, new_hi = self.tm.claims(new).aabb()
+        want = self._zone_hits(new_lo, new_hi) & ~cur_hits & req[:, None]
+        for z in range(len(self.zones)):
+            cand = [state.ids[i] for i in np.nonzero(want[:, z])[0]]
+            for v in cand:
+                self.zone_wait.setdefault((z, v), self.t)
+            holder = self.zone_holder[z]
+            if holder is None and cand:
+                holder = min(cand, key=lambda v: (self.zone_wait[(z, v)], v))
+                self.zone_holder[z] = holder
+            for v in cand:
+                if v != holder:
+                    req[pos[v]] = False
+        for key in [k for k in self.zone_wait if k[1] not in pos or self.zone_holder[k[0]] == k[1]]:
+            self.zone_wait.pop(key, None)
+        return FleetState(ids=state.ids, family=state.family, centre=state.centre, index=state.index,
+                          heading=state.heading, length=state.length, width=state.width, requesting=req,
+                          req_centre=state.req_centre, req_index=state.req_index, req_heading=state.req_heading)
 
     # -------------------------------------------------------------- one step
     def step(self) -> dict:

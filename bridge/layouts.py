@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from bridge.cosim import VehicleSpec
+from bridge.cosim import VehicleSpec, Zone
 
 __all__ = ["subsample", "paper10", "swap", "crossing"]
 
@@ -52,20 +52,22 @@ def swap(n: int, vclass: str, delta: float, radius: float | None = None) -> list
     return specs
 
 
-def crossing(per_stream: int, vclass: str, delta: float, half: float = 60.0,
-             headway_s: float = 4.0) -> list[VehicleSpec]:
-    """Four streams (E, N, W, S bound) through one square; right-hand traffic, 4 m lane offset."""
+def crossing(per_stream: int, vclass: str, delta: float, half: float = 90.0, offset: float = 12.0,
+             headway_s: float = 4.0) -> tuple[list[VehicleSpec], list[Zone]]:
+    """Four streams (E, N, W, S bound) through one square, right-hand traffic ``offset`` m
+    from the axes (wide enough that opposite streams' tubes do not meet), and the square
+    as a conflict zone."""
     specs = []
-    dirs = {"E": (np.array([1.0, 0.0]), np.array([0.0, -4.0])),
-            "N": (np.array([0.0, 1.0]), np.array([4.0, 0.0])),
-            "W": (np.array([-1.0, 0.0]), np.array([0.0, 4.0])),
-            "S": (np.array([0.0, -1.0]), np.array([-4.0, 0.0]))}
+    dirs = {"E": (np.array([1.0, 0.0]), np.array([0.0, -offset])),
+            "N": (np.array([0.0, 1.0]), np.array([offset, 0.0])),
+            "W": (np.array([-1.0, 0.0]), np.array([0.0, offset])),
+            "S": (np.array([0.0, -1.0]), np.array([-offset, 0.0]))}
     for name, (d, off) in dirs.items():
         for k in range(per_stream):
             pts = np.array([off - half * d, off + half * d])
             specs.append(VehicleSpec(id=f"{name}{k}", vclass=vclass, waypoints=subsample(pts, delta),
                                      depart_s=k * headway_s))
-    return specs
+    return specs, [Zone("square", (-offset, -offset), (offset, offset))]
 
 
 def paper10(deltas: dict[str, float]) -> list[VehicleSpec]:

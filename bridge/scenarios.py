@@ -96,13 +96,14 @@ def run_multi(name: str, out: Path, opts, world=None, specs=None) -> dict:
     classes = builtin_classes()
     if name != "paper10" and opts.vclass not in classes:
         raise ScenarioRunError(f"--vclass: unknown vehicle class {opts.vclass!r}; valid: {', '.join(classes)}")
+    zones = None
     if specs is None:
         if name == "paper10":
             specs = paper10({c: classes[c].model.delta for c in classes})
         elif name == "swap":
             specs = swap(opts.vehicles, opts.vclass, classes[opts.vclass].model.delta)
         elif name == "crossing":
-            specs = crossing(max(opts.vehicles // 4, 1), opts.vclass, classes[opts.vclass].model.delta)
+            specs, zones = crossing(max(opts.vehicles // 4, 1), opts.vclass, classes[opts.vclass].model.delta)
         else:
             raise ScenarioRunError(f"unknown scenario {name!r}; built-in scenarios: {', '.join(SCENARIOS)}")
     out.mkdir(parents=True, exist_ok=True)
@@ -116,7 +117,7 @@ def run_multi(name: str, out: Path, opts, world=None, specs=None) -> dict:
         settings = CosimSettings(tm=TMSettings(policy=opts.tm, check=opts.check, seed=opts.seed),
                                  switching=opts.switching, disturbance=opts.disturbance, solver=opts.solver,
                                  seed=opts.seed, duration_s=opts.duration)
-        sim = Cosim(classes, specs, settings, world=world)
+        sim = Cosim(classes, specs, settings, world=world, zones=zones)
         max_steps = int(getattr(opts, "max_steps", 0) or 20000)
         sim.run(max_steps)
         summary["complete"] = True

@@ -64,6 +64,8 @@ def test_no_footprint_overlap_and_no_invariant_violation(scenario):
 @pytest.mark.parametrize("name, opts, bound_s", [
     ("swap", _opts(vehicles=8), 150.0),
     ("paper10", _opts(), 60.0),
+    ("crossing", _opts(vehicles=8), 200.0),
+    ("crossing", _opts(vehicles=8, switching="terminal", tm="greedy"), 400.0),
 ])
 def test_liveness(tmp_path, name, opts, bound_s):
     """Every vehicle reaches its last waypoint within the stated bound (early switching)."""
@@ -81,6 +83,22 @@ def test_same_seed_same_decisions(tmp_path):
     cols = ["t_s", "active", "requests", "grants", "denials", "edges", "min_separation_m"]
     pd.testing.assert_frame_equal(sa[cols], sb[cols])
     assert a["stop_commands"] == b["stop_commands"] > 0
+
+
+def test_zone_token_prevents_gridlock_at_a_crossing():
+    """Without the zone rule the four leading vehicles of `crossing` gridlock inside the square
+    (each waits for another's hold region, forever); with it they all cross."""
+    from bridge.layouts import crossing
+
+    specs, zones = crossing(1, "paper-a", CLASSES["paper-a"].model.delta)
+    runs = {}
+    for name, z in (("with", zones), ("without", None)):
+        sim = Cosim(CLASSES, specs, CosimSettings(switching="early"), zones=z)
+        sim.run(max_steps=1500)
+        runs[name] = kpi_tables(sim)[0]
+    assert runs["with"]["finished"]
+    assert not runs["without"]["finished"] and runs["without"]["stop_commands"] > 1000
+    assert runs["with"]["collisions_geometric"] == runs["without"]["collisions_geometric"] == 0
 
 
 def test_invalid_waypoints_named():
