@@ -228,22 +228,25 @@ class _Conflicts:
     seconds: tuple             # claims, broad, narrow
 
 
+def _check_levels(table: FamilyTable, state: FleetState, fam: np.ndarray, vehicles: np.ndarray,
+                  index: np.ndarray, what: str) -> None:
+    """Raise, naming the vehicle, if an ``index`` is outside ``0 .. N`` of its family."""
+    n_levels = table.n_levels[fam[vehicles]]
+    bad = (index < 0) | (index >= n_levels)
+    if bad.any():
+        t = int(np.argmax(bad))
+        v = int(vehicles[t])
+        raise ValueError(f"vehicle {state.ids[v]!r}: {what} {int(index[t])} outside 0..{n_levels[t] - 1} "
+                         f"of family {table.keys[fam[v]]!r}")
+
+
 def _claims_of(table: FamilyTable, state: FleetState, requests: bool) -> tuple[np.ndarray, Claims, Claims]:
     """Current claims of all vehicles and new claims of the requesters, validated."""
     fam = table.family_index(state.family)
-    n_levels = table.n_levels[fam]
-    bad = (state.index < 0) | (state.index >= n_levels)
-    if bad.any():
-        v = int(np.flatnonzero(bad)[0])
-        raise ValueError(f"vehicle {state.ids[v]!r}: index {int(state.index[v])} outside 0..{n_levels[v] - 1} "
-                         f"of family {table.keys[fam[v]]!r}")
+    _check_levels(table, state, fam, np.arange(len(state)), state.index, "index")
     cur = Claims(table, fam, state.centre, state.index, state.heading, state.length, state.width)
     req = np.flatnonzero(state.requesting) if requests else np.zeros(0, dtype=np.intp)
-    bad = (state.req_index[req] < 0) | (state.req_index[req] >= n_levels[req])
-    if bad.any():
-        v = int(req[np.flatnonzero(bad)[0]])
-        raise ValueError(f"vehicle {state.ids[v]!r}: requested index {int(state.req_index[v])} outside "
-                         f"0..{n_levels[v] - 1} of family {table.keys[fam[v]]!r}")
+    _check_levels(table, state, fam, req, state.req_index[req], "requested index")
     new = Claims(table, fam[req], state.req_centre[req], state.req_index[req], state.req_heading[req],
                  state.length[req], state.width[req])
     return req, cur, new
@@ -435,10 +438,10 @@ class TrafficManager:
             Admitted mask.
         """
         cur = current if isinstance(current, Claims) else self.claims(current)
-        cand = self.claims(candidates)
-        n, C = len(cur), len(cand)
         if cur.table is not self.table:
             raise ValueError("admit: current claims were built with another FamilyTable")
+        cand = self.claims(candidates)
+        n, C = len(cur), len(cand)
         i, j = conflicting_pairs(Claims.concat(cur, cand), self.settings.check, mask=np.arange(n + C) >= n)
         blocked = np.zeros(C, dtype=bool)
         blocked[j[i < n] - n] = True
