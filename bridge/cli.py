@@ -49,17 +49,37 @@ def _cmd_sets(args) -> int:
     return 0
 
 
+FREE_PLANE = ("single", "paper10", "swap", "crossing")
+
+
 def _cmd_run(args) -> int:
     from bridge.scenarios import ScenarioRunError, run_scenario
 
     out = Path(args.out)
-    try:
-        summary = run_scenario(args.scenario, out, args)
-    except ScenarioRunError as exc:
-        print(f"muvsim run: {exc}", file=sys.stderr)
-        return 2
-    keys = ("scenario", "steps", "vehicles", "finished", "collisions_geometric",
-            "invariant_violations", "constraint_violations", "min_separation_m", "stop_commands", "wall_s")
+    if args.scenario in FREE_PLANE:
+        for name, default in (("tm", "optimal"), ("check", "union"), ("switching", "early"),
+                              ("disturbance", "random")):
+            if getattr(args, name) is None:
+                setattr(args, name, default)
+        args.seed = 0 if args.seed is None else args.seed
+        if args.baseline:
+            print("muvsim run: --baseline sumo needs a SUMO scenario (grid, grid-large, a .toml or a "
+                  ".sumocfg)", file=sys.stderr)
+            return 2
+        try:
+            summary = run_scenario(args.scenario, out, args)
+        except ScenarioRunError as exc:
+            print(f"muvsim run: {exc}", file=sys.stderr)
+            return 2
+    else:
+        from bridge.sumo_world import run_sumo
+
+        summary = run_sumo(args.scenario, out, args)
+        if "error" in summary:
+            print(f"muvsim run: {summary['error']}", file=sys.stderr)
+    keys = ("scenario", "baseline", "steps", "vehicles", "vehicles_total", "vehicles_arrived", "finished",
+            "collisions_sumo", "collisions_geometric", "invariant_violations", "constraint_violations",
+            "min_separation_m", "stop_commands", "mean_travel_time_s", "rtf", "wall_s", "error")
     width = max(len(k) for k in keys)
     for k in keys:
         if k in summary:
@@ -77,15 +97,20 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--no-cache", action="store_true", help="ignore and do not write the set cache")
     s.set_defaults(func=_cmd_sets)
     r = sub.add_parser("run", help="run a scenario")
-    r.add_argument("scenario", nargs="?", default="single",
-                   help="built-in scenario: single (default), paper10, swap, crossing")
+    r.add_argument("scenario", nargs="?", default="grid",
+                   help="grid (default), grid-large, a scenario .toml, a .sumocfg, or a free-plane "
+                        "scenario: single, paper10, swap, crossing")
     r.add_argument("--out", default="runs/latest", help="output directory (default runs/latest)")
-    r.add_argument("--seed", type=int, default=0)
+    r.add_argument("--seed", type=int, default=None, help="default: the scenario's seed (0 free-plane)")
     r.add_argument("--vclass", default="paper-a", help="vehicle class for single/swap/crossing")
-    r.add_argument("--tm", choices=["greedy", "optimal"], default="optimal")
-    r.add_argument("--check", choices=["union", "timed"], default="union")
-    r.add_argument("--switching", choices=["terminal", "early"], default="early")
-    r.add_argument("--disturbance", choices=["random", "adversarial", "none"], default="random")
+    r.add_argument("--tm", choices=["greedy", "optimal"], default=None, help="default: the scenario's")
+    r.add_argument("--check", choices=["union", "timed"], default=None)
+    r.add_argument("--switching", choices=["terminal", "early"], default=None)
+    r.add_argument("--disturbance", choices=["random", "adversarial", "none"], default=None)
+    r.add_argument("--baseline", choices=["sumo"], default=None,
+                   help="drive the same demand by SUMO itself (no muvsim control)")
+    r.add_argument("--gui", action="store_true", help="sumo-gui (needs a display)")
+    r.add_argument("--quiet", action="store_true", help="no progress bar")
     r.add_argument("--solver", choices=["exact", "daqp", "proxsuite"], default="exact")
     r.add_argument("--duration", type=float, default=None, help="simulated seconds (default: until done)")
     r.add_argument("--vehicles", type=int, default=8, help="vehicles in swap")
