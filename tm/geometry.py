@@ -397,7 +397,9 @@ def min_pair_distance(P) -> tuple[float, int, int]:
 
     Boxes inflated by ``r / 2`` give every pair closer than ``r`` as a broad-
     phase candidate; ``r`` doubles until the nearest candidate is closer
-    than ``r``, which proves it the global minimum.
+    than ``r``, which proves it the global minimum.  Among the candidates,
+    exact distances are computed only where the boxes' gap (a lower bound)
+    does not exceed the exact distance of the pair with the smallest gap.
 
     Returns
     -------
@@ -416,10 +418,14 @@ def min_pair_distance(P) -> tuple[float, int, int]:
     while True:
         i, j = broad_phase(lo - r / 2, hi + r / 2, tol=0.0)
         if len(i):
-            d = polygon_distance(P[i], P[j])
+            gap = np.maximum(np.maximum(lo[i] - hi[j], lo[j] - hi[i]), 0.0)
+            bound = np.hypot(gap[:, 0], gap[:, 1])
+            t = int(np.argmin(bound))
+            near = np.flatnonzero(bound <= polygon_distance(P[i[[t]]], P[j[[t]]])[0])
+            d = polygon_distance(P[i[near]], P[j[near]])
             t = int(np.argmin(d))
             if d[t] <= r or r > 2 * span:
-                return float(d[t]), int(i[t]), int(j[t])
+                return float(d[t]), int(i[near[t]]), int(j[near[t]])
         r *= 2.0
 
 
