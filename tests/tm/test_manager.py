@@ -105,22 +105,22 @@ def test_optimal_stops_no_more_than_greedy(scenario, seed):
 
 
 def test_timed_differs_without_nesting():
-    """Non-nested family (vertical bar, then horizontal bar): the union claim is the hull of
-    the cross and blocks a request that the timed check grants."""
+    """Non-nested family (vertical bar, then horizontal bar): the union claim of a (l = 2) is
+    the hull of the cross (edge x + y = 3.2), the timed claims are the bars.  b asks to move
+    from (2.5, 2.5) (outside the hull) to (1.5, 1.6) (inside the hull, off both bars): union
+    denies it, timed grants it; likewise admission of a vehicle at (1.5, 1.5)."""
     families = {"cross": [box(0.2, 3.0), box(3.0, 0.2), box(3.0, 3.0)], "dot": [box(0.1, 0.1)]}
-    state = FleetState(ids=["a", "b"], family=["cross", "dot"], centre=[[0, 0], [1.5, 1.5]], index=[2, 0],
+    state = FleetState(ids=["a", "b"], family=["cross", "dot"], centre=[[0, 0], [2.5, 2.5]], index=[2, 0],
                        heading=[0, 0], length=[0.1, 0.1], width=[0.1, 0.1], requesting=[False, True],
                        req_centre=[[0, 0], [1.5, 1.6]], req_index=[0, 0], req_heading=[0, 0])
-    union = TrafficManager(TMSettings(check="union"), families)
-    timed = TrafficManager(TMSettings(check="timed"), families)
-    assert union.admit(FleetState(**{**_one(state, 0)}), FleetState(**{**_one(state, 1)})).tolist() == [False]
-    assert timed.admit(FleetState(**{**_one(state, 0)}), FleetState(**{**_one(state, 1)})).tolist() == [True]
+    union = TrafficManager(TMSettings(check="union", verify=True), families)
+    timed = TrafficManager(TMSettings(check="timed", verify=True), families)
+    assert union.decide(state).go.tolist() == [False, False]
     assert timed.decide(state).go.tolist() == [False, True]
-
-
-def _one(state: FleetState, v: int) -> dict:
-    return dict(ids=[state.ids[v]], family=[state.family[v]], centre=state.centre[[v]], index=state.index[[v]],
-                heading=state.heading[[v]], length=state.length[[v]], width=state.width[[v]])
+    cand = FleetState(ids=["c"], family=["dot"], centre=[[1.5, 1.5]], index=[0], heading=[0], length=[0.1],
+                      width=[0.1])
+    assert union.admit(state, cand).tolist() == [False]
+    assert timed.admit(state, cand).tolist() == [True]
 
 
 def _line_state(xs, index, requesting, req_xs, req_index, length=1.0, width=1.0):
