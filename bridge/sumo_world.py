@@ -155,7 +155,7 @@ def run_sumo(target: str, out: Path, opts) -> dict:
         if bar is not None:
             bar.close()
         summary["complete"] = True
-    except (ScenarioError, RouteError, SumoError, ValueError) as exc:
+    except (ScenarioError, RouteError, SumoError) as exc:
         summary["error"] = f"{type(exc).__name__}: {exc}"
     except Exception as exc:
         summary.update(error=f"{type(exc).__name__}: {exc}", traceback=traceback.format_exc(limit=6))

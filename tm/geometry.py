@@ -421,7 +421,9 @@ def min_pair_distance(P) -> tuple[float, int, int]:
             gap = np.maximum(np.maximum(lo[i] - hi[j], lo[j] - hi[i]), 0.0)
             bound = np.hypot(gap[:, 0], gap[:, 1])
             t = int(np.argmin(bound))
-            near = np.flatnonzero(bound <= polygon_distance(P[i[[t]]], P[j[[t]]])[0])
+            # the box gap is a lower bound of the distance, equal to it for boxes apart along
+            # one axis: compare with a round-off margin so the pair itself is always kept
+            near = np.flatnonzero(bound <= polygon_distance(P[i[[t]]], P[j[[t]]])[0] + GEOMETRY_TOL)
             d = polygon_distance(P[i[near]], P[j[near]])
             t = int(np.argmin(d))
             if d[t] <= r or r > 2 * span:
