@@ -421,9 +421,10 @@ def min_pair_distance(P) -> tuple[float, int, int]:
             gap = np.maximum(np.maximum(lo[i] - hi[j], lo[j] - hi[i]), 0.0)
             bound = np.hypot(gap[:, 0], gap[:, 1])
             t = int(np.argmin(bound))
-            # the box gap is a lower bound of the distance, equal to it for boxes apart along
-            # one axis: compare with a round-off margin so the pair itself is always kept
-            near = np.flatnonzero(bound <= polygon_distance(P[i[[t]]], P[j[[t]]])[0] + GEOMETRY_TOL)
+            # the box gap is a lower bound of the distance, equal to it for boxes apart along one
+            # axis, where round-off can put it 1 ulp above: max(.., bound[t]) always keeps pair t
+            ub = polygon_distance(P[i[[t]]], P[j[[t]]])[0]
+            near = np.flatnonzero(bound <= max(ub, bound[t]))
             d = polygon_distance(P[i[near]], P[j[near]])
             t = int(np.argmin(d))
             if d[t] <= r or r > 2 * span:
