@@ -17,7 +17,9 @@ with one LP per pair that involves a requester, ``R (V - 1) - R (R - 1) / 2``
 LPs (scipy ``linprog``, HiGHS).  The time per LP is measured on a sample of
 the scenario's own claim pairs; the total is measured outright when it has at
 most ``--lp-measure-max`` pairs and otherwise extrapolated (column
-``lp_measured``).  Prints a table and writes it as CSV.  One machine, medians.
+``lp_measured``).  Prints a table and writes it as CSV; also prints the
+median time of one runtime-monitor step per fleet size (footprints at the
+claim centres).  One machine, medians.
 """
 
 from __future__ import annotations
@@ -35,6 +37,7 @@ from controllers.settings import SynthesisSettings
 from controllers.synthesis import synthesize
 from tm.geometry import lp_depth
 from tm.manager import FleetState, TrafficManager
+from tm.monitor import Monitor
 from tm.settings import TMSettings
 
 STREETS = np.arange(5) * 200.0
@@ -168,6 +171,16 @@ def main(argv=None) -> pd.DataFrame:
                                  conflicts=len(d.edges), stopped=len(d.stopped),
                                  lp_pairs=lp_pairs, lp_ms_per_pair=per_lp * 1e3, lp_total_s=lp_total,
                                  lp_measured=measured, speedup=lp_total / np.median(walls)))
+    for V, fleet in fleets.items():                             # the runtime monitor, every step of a run
+        claims = TrafficManager(TMSettings(), families).claims(fleet)
+        monitor = Monitor("union")
+        walls = []
+        for _ in range(repeats):
+            t = time.perf_counter()
+            ms = monitor.step(fleet.ids, fleet.centre, fleet.heading, fleet.length, fleet.width, claims)
+            walls.append(time.perf_counter() - t)
+        print(f"monitor step, {V} vehicles: {np.median(walls) * 1e3:.2f} ms (min separation "
+              f"{ms.min_separation:.3f} m, {ms.footprint_overlaps} overlaps, {ms.claim_violations} violations)")
     df = pd.DataFrame(rows)
     with pd.option_context("display.width", 200, "display.max_columns", 30, "display.float_format", "{:.3g}".format):
         print(df.to_string(index=False))
