@@ -220,7 +220,8 @@ class Cosim:
         cs = ControllerSettings(solver=settings.solver, switching=settings.switching)
         self.families = {c: synthesize(vc.model, synthesis) for c, vc in self.classes.items()}
         self.groups = {c: _Group(vc, STMPC(self.families[c], cs)) for c, vc in self.classes.items()}
-        self.tm = TrafficManager(settings.tm, {c: f.position_sets for c, f in self.families.items()})
+        self.tm = TrafficManager(settings.tm, {c: f.position_sets for c, f in self.families.items()},
+                                 rotating=[c for c, vc in self.classes.items() if vc.model.frame == "road"])
         self.monitor = Monitor(settings.tm.check)
         self.pending = sorted(specs, key=lambda s: (s.depart_s, s.id))
         self.records = {s.id: VehicleRecord(s.id, s.vclass, s.depart_s, s.route_length_m) for s in specs}
@@ -258,7 +259,7 @@ class Cosim:
             Wd.append(np.full(len(g.ids), g.vclass.width))
             if with_requests:
                 nxt, nh, has = g.centres(1)
-                lp = g.ctl.index(g.X, nxt)
+                lp = g.ctl.index(g.X, nxt, nh)
                 may = has & (lp <= g.ctl.N)
                 if self.settings.switching == "terminal":
                     may &= g.l == 0
@@ -337,8 +338,8 @@ class Cosim:
                 gmask = np.array([go[v] for v in g.ids])
                 rmask = np.array([req[v] for v in g.ids])
                 if gmask.any():
-                    nxt, _, _ = g.centres(1)
-                    lp = g.ctl.index(g.X[gmask], nxt[gmask])
+                    nxt, nh, _ = g.centres(1)
+                    lp = g.ctl.index(g.X[gmask], nxt[gmask], nh[gmask])
                     g.k[gmask] += 1
                     g.l[gmask] = lp
                 for v, r, gg in zip(g.ids, rmask, gmask):
@@ -357,13 +358,13 @@ class Cosim:
             if not g.ids:
                 continue
             m = g.vclass.model
-            cen, _, _ = g.centres()
-            U = g.ctl.control(g.X, cen, g.l, ids=g.ids)
-            g.X, _ = plant_step(m, g.X, U, cen, s.disturbance, self.rng)
-            l_new = g.ctl.index(g.X, cen)
+            cen, hd, _ = g.centres()
+            U = g.ctl.control(g.X, cen, g.l, ids=g.ids, heading=hd)
+            g.X, _ = plant_step(m, g.X, U, cen, s.disturbance, self.rng, heading=hd)
+            l_new = g.ctl.index(g.X, cen, hd)
             bad = ~((l_new < g.l) | ((g.l == 0) & (l_new == 0)))
             self.invariant_violations += int(bad.sum())
-            z = g.X[:, 2:]
+            z = g.ctl.error(g.X, cen, hd)[:, 2:]  # constraints hold in the model's frame
             self.constraint_violations += int(np.sum(np.any((z > m.z_bounds[1] + 1e-7) |
                                                             (z < m.z_bounds[0] - 1e-7), axis=1)))
             g.l = l_new
@@ -424,6 +425,13 @@ class Cosim:
             cur = FleetState(ids=[], family=np.array([], dtype=str), centre=np.zeros((0, 2)),
                              index=np.zeros(0, dtype=np.intp), heading=np.zeros(0), length=np.zeros(0),
                              width=np.zeros(0))
+        else:
+            # A new vehicle appears NOW: it must miss where the others are now (P^l), not only
+            # their claims from the next step on (P^{l-1}).  Claims of index l+1 are P^l.
+            top = np.array([self.families[str(c)].N for c in cur.family])
+            cur = FleetState(ids=cur.ids, family=cur.family, centre=cur.centre,
+                             index=np.minimum(cur.index + 1, top), heading=cur.heading, length=cur.length,
+                             width=cur.width)
         ok = self.tm.admit(cur, cand)
         n = 0
         for sp, a in zip(ready, ok):
@@ -432,7 +440,8 @@ class Cosim:
             g = self.groups[sp.vclass]
             W = np.asarray(sp.waypoints, dtype=float)
             x0 = g.vclass.model.equilibrium(W[0])
-            g.add(sp.id, W, _headings(W), x0, int(g.ctl.index(x0[None], W[:1])[0]))
+            H = _headings(W)
+            g.add(sp.id, W, H, x0, int(g.ctl.index(x0[None], W[:1], H[:1])[0]))
             self.records[sp.id].admitted_s = t_s
             self.world.insert(sp, g.vclass)
             self.pending.remove(sp)

@@ -19,7 +19,7 @@ from controllers.classes import VehicleClass
 from controllers.plant import DISTURBANCES, step
 from controllers.settings import ControllerSettings, SynthesisSettings
 from controllers.stmpc import STMPC
-from controllers.synthesis import synthesize
+from controllers.synthesis import rotate_pairs, synthesize
 
 __all__ = ["Trajectory", "follow_waypoints", "zigzag_waypoints"]
 
@@ -80,27 +80,31 @@ def follow_waypoints(vclass: VehicleClass, waypoints: np.ndarray, *, disturbance
     m = vclass.model
     rng = np.random.default_rng(seed)
     max_steps = max_steps or (len(W) + 2) * (fam.N + 2)
+    d = np.diff(W, axis=0)
+    H = np.arctan2(d[:, 1], d[:, 0])
+    H = np.concatenate([H[:1], H])  # heading of the segment into each waypoint (road frame)
     x = m.equilibrium(W[0])[None, :]
     k = 0
-    l = int(ctl.index(x, W[[k]])[0])
+    l = int(ctl.index(x, W[[k]], H[[k]])[0])
     Xs, Us, Ds, ks, ls = [x[0]], [], [], [k], [l]
     inv = cons = 0
     for _ in range(max_steps):
         if k == len(W) - 1 and l == 0:
             break
         if k < len(W) - 1:
-            l_next = int(ctl.index(x, W[[k + 1]])[0])
+            l_next = int(ctl.index(x, W[[k + 1]], H[[k + 1]])[0])
             may = (l == 0) if switching == "terminal" else True
             if may and l_next <= fam.N:
                 k, l = k + 1, l_next
-        u = ctl.control(x, W[[k]], np.array([l]))
-        x, d = step(m, x, u, W[[k]], disturbance, rng)
-        l_new = int(ctl.index(x, W[[k]])[0])
+        u = ctl.control(x, W[[k]], np.array([l]), heading=H[[k]])
+        x, d = step(m, x, u, W[[k]], disturbance, rng, heading=H[[k]])
+        l_new = int(ctl.index(x, W[[k]], H[[k]])[0])
         if not (l_new < l or (l == 0 and l_new == 0)):
             inv += 1
-        z = x[0, 2:]
+        z = ctl.error(x, W[[k]], H[[k]])[0, 2:]  # constraints hold in the model's frame
+        u_model = rotate_pairs(u, -H[[k]]) if m.frame == "road" else u
         if np.any(z > m.z_bounds[1] + tol.VERIFY_TOL) or np.any(z < m.z_bounds[0] - tol.VERIFY_TOL) \
-                or np.any(u > m.u_bounds[1] + 1e-9) or np.any(u < m.u_bounds[0] - 1e-9):
+                or np.any(u_model > m.u_bounds[1] + 1e-9) or np.any(u_model < m.u_bounds[0] - 1e-9):
             cons += 1
         l = l_new
         Xs.append(x[0]); Us.append(u[0]); Ds.append(d[0]); ks.append(k); ls.append(l)

@@ -13,7 +13,10 @@ from dataclasses import dataclass
 
 from controllers.models import VehicleModel, double_integrator, drag_integrator
 
-__all__ = ["VehicleClass", "builtin_classes", "get_class", "ClassError"]
+__all__ = ["VehicleClass", "builtin_classes", "get_class", "ClassError", "CITY_TURN_MAX_DEG"]
+
+#: Largest heading change between successive route segments the urban classes accept.
+CITY_TURN_MAX_DEG = 45.0
 
 
 class ClassError(KeyError):
@@ -67,14 +70,19 @@ def builtin_classes() -> dict[str, VehicleClass]:
                            length=5.0, width=1.8, vclass="passenger")
         for name, (v, d, dl) in paper.items()
     }
+    # Urban classes work in the road frame (x along the segment, y across): fast along the
+    # road, slow and tightly disturbed across it, so their tubes stay inside ~ a lane.
+    road = dict(frame="road", turn_max_deg=CITY_TURN_MAX_DEG, delta=3.0)
     out["car"] = VehicleClass(
-        "car", double_integrator(v_max=13.89, u_max=3.0, d_max=0.02, delta=3.0, name="car"),
+        "car", double_integrator(v_max=(13.89, 0.2), u_max=(3.0, 0.5), d_max=0.005, name="car", **road),
         length=5.0, width=1.8, vclass="passenger")
     out["bus"] = VehicleClass(
-        "bus", drag_integrator(v_max=13.89, u_max=1.5, d_max=0.02, delta=3.0, tau=10.0, name="bus"),
+        "bus", drag_integrator(v_max=(13.89, 0.2), u_max=(1.5, 0.5), d_max=0.005, tau=10.0, name="bus",
+                               **road),
         length=12.0, width=2.5, vclass="bus")
     out["truck"] = VehicleClass(
-        "truck", double_integrator(v_max=13.89, u_max=1.5, d_max=0.02, delta=3.0, name="truck"),
+        "truck", double_integrator(v_max=(13.89, 0.2), u_max=(1.5, 0.5), d_max=0.005, name="truck",
+                                   **road),
         length=7.1, width=2.4, vclass="truck")
     return out
 

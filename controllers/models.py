@@ -72,6 +72,15 @@ class VehicleModel:
         Largest distance between successive waypoints (m), > 0.
     Ts : float
         Sampling time (s), > 0.
+    frame : {"world", "road"}
+        ``world``: the boxes hold in world axes (the paper).  ``road``: the
+        state is expressed in the frame of the current waypoint's segment
+        (x along, y across the road), so the boxes bound longitudinal and
+        lateral motion separately; the model must be rotation invariant
+        (coordinates in (x, y) pairs) and waypoint switches are checked for
+        turns up to ``turn_max_deg``.
+    turn_max_deg : float
+        Largest heading change between successive segments (``road`` frame).
     """
 
     name: str
@@ -82,6 +91,8 @@ class VehicleModel:
     d_bounds: tuple
     delta: float
     Ts: float
+    frame: str = "world"
+    turn_max_deg: float = 0.0
     _cache: dict = field(default_factory=dict, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -122,6 +133,16 @@ class VehicleModel:
             raise ModelError(f"delta: the waypoint spacing must be > 0 m, got {self.delta}")
         if not (np.isfinite(self.Ts) and self.Ts > 0):
             raise ModelError(f"Ts: the sampling time must be > 0 s, got {self.Ts}")
+        if self.frame not in ("world", "road"):
+            raise ModelError(f"frame: must be 'world' or 'road', got {self.frame!r}")
+        if self.frame == "road":
+            pairs_ok = n % 2 == 0 and B.shape[1] == 2
+            R = np.kron(np.eye(n // 2), [[0.0, -1.0], [1.0, 0.0]]) if n % 2 == 0 else None
+            if not pairs_ok or not (np.allclose(R @ A, A @ R) and np.allclose(R @ B, B @ np.array([[0, -1], [1, 0]]))):
+                raise ModelError("frame: 'road' needs a rotation-invariant model (states in (x, y) pairs, "
+                                 "two inputs (u_x, u_y), the same dynamics on both axes)")
+            if not (0.0 <= self.turn_max_deg < 90.0):
+                raise ModelError(f"turn_max_deg: must be in [0, 90) degrees, got {self.turn_max_deg}")
         for arr in (A, B, zlo, zhi, ulo, uhi, dlo, dhi):
             arr.setflags(write=False)
         object.__setattr__(self, "A", A)
@@ -168,7 +189,8 @@ class VehicleModel:
         h.update(self.name.encode())
         for arr in (self.A, self.B, *self.z_bounds, *self.u_bounds, *self.d_bounds):
             h.update(np.ascontiguousarray(np.round(arr, 15)).tobytes())
-        h.update(np.array([self.delta, self.Ts]).tobytes())
+        h.update(np.array([self.delta, self.Ts, self.turn_max_deg]).tobytes())
+        h.update(self.frame.encode())
         return h.hexdigest()[:16]
 
 
@@ -225,32 +247,39 @@ def _axes(Ac1: np.ndarray, Bc1: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return Ac, Bc
 
 
-def _second_order(name, lag, v_max, u_max, d_max, delta, Ts) -> VehicleModel:
-    """Per-axis ``p' = v, v' = lag v + a`` (``lag = 0``: double integrator), ZOH."""
+def _second_order(name, lag, v_max, u_max, d_max, delta, Ts, frame="world", turn_max_deg=0.0) -> VehicleModel:
+    """Per-axis ``p' = v, v' = lag v + a`` (``lag = 0``: double integrator), ZOH.
+
+    ``v_max``, ``u_max`` and ``d_max`` are scalars (same on both axes) or (x, y) pairs;
+    ``d_max`` as a pair bounds (position, velocity) disturbances per axis as
+    ``[d_px, d_py, d_vx, d_vy] = [dx, dy, dx, dy]``."""
     Ac, Bc = _axes(np.array([[0.0, 1.0], [0.0, lag]]), np.array([[0.0], [1.0]]))
     A, B = _zoh(Ac, Bc, Ts)
-    return VehicleModel(name=name, A=A, B=B,
-                        z_bounds=(-np.full(2, v_max), np.full(2, v_max)),
-                        u_bounds=(-np.full(2, u_max), np.full(2, u_max)),
-                        d_bounds=(-np.full(4, d_max), np.full(4, d_max)),
-                        delta=delta, Ts=Ts)
+    v = np.broadcast_to(np.asarray(v_max, dtype=float), (2,))
+    u = np.broadcast_to(np.asarray(u_max, dtype=float), (2,))
+    d = np.tile(np.broadcast_to(np.asarray(d_max, dtype=float), (2,)), 2)
+    return VehicleModel(name=name, A=A, B=B, z_bounds=(-v, v), u_bounds=(-u, u), d_bounds=(-d, d),
+                        delta=delta, Ts=Ts, frame=frame, turn_max_deg=turn_max_deg)
 
 
-def double_integrator(*, v_max: float, u_max: float, d_max: float, delta: float,
-                      Ts: float = 0.1, name: str = "double-integrator") -> VehicleModel:
+def double_integrator(*, v_max, u_max, d_max, delta: float, Ts: float = 0.1,
+                      name: str = "double-integrator", frame: str = "world",
+                      turn_max_deg: float = 0.0) -> VehicleModel:
     """The paper's model: ``x = [p_x, p_y, v_x, v_y]``, ``u = [a_x, a_y]``.
 
-    ``|v| <= v_max``, ``|u| <= u_max`` per axis; ``|d_j| <= d_max`` on all four states.
+    ``|v| <= v_max``, ``|u| <= u_max`` per axis; ``|d_j| <= d_max`` on all four states
+    (each a scalar, or an (x, y) pair for different axes, e.g. along / across a road).
     """
-    return _second_order(name, 0.0, v_max, u_max, d_max, delta, Ts)
+    return _second_order(name, 0.0, v_max, u_max, d_max, delta, Ts, frame, turn_max_deg)
 
 
-def drag_integrator(*, v_max: float, u_max: float, d_max: float, delta: float,
-                    tau: float = 5.0, Ts: float = 0.1, name: str = "drag-integrator") -> VehicleModel:
+def drag_integrator(*, v_max, u_max, d_max, delta: float, tau: float = 5.0, Ts: float = 0.1,
+                    name: str = "drag-integrator", frame: str = "world",
+                    turn_max_deg: float = 0.0) -> VehicleModel:
     """Double integrator with first-order velocity lag: ``v' = -v/tau + a``."""
     if not (np.isfinite(tau) and tau > 0):
         raise ModelError(f"tau: the velocity time constant must be > 0 s, got {tau}")
-    return _second_order(name, -1.0 / tau, v_max, u_max, d_max, delta, Ts)
+    return _second_order(name, -1.0 / tau, v_max, u_max, d_max, delta, Ts, frame, turn_max_deg)
 
 
 def jerk_integrator(*, v_max: float, a_max: float, j_max: float, d_max: float, delta: float,

@@ -40,8 +40,19 @@ def disturbance(model: VehicleModel, policy: str, nominal_error: np.ndarray,
 
 
 def step(model: VehicleModel, X: np.ndarray, U: np.ndarray, centres: np.ndarray, policy: str,
-         rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-    """One plant step for many vehicles; returns ``(X_next, D)``."""
+         rng: np.random.Generator, heading=None) -> tuple[np.ndarray, np.ndarray]:
+    """One plant step for many vehicles; returns ``(X_next, D)`` (world frame).
+
+    For ``road``-frame models the disturbance box holds in the frame of ``heading``
+    (along / across the segment); it is drawn there and rotated to the world.
+    """
     nominal = X @ model.A.T + U @ model.B.T
-    D = disturbance(model, policy, nominal - model.equilibrium(centres), rng)
+    err = nominal - model.equilibrium(centres)
+    if model.frame == "road":
+        from controllers.synthesis import rotate_pairs
+
+        h = np.asarray(heading, dtype=float)
+        D = rotate_pairs(disturbance(model, policy, rotate_pairs(err, -h), rng), h)
+    else:
+        D = disturbance(model, policy, err, rng)
     return nominal + D, D

@@ -43,6 +43,11 @@ class SynthesisSettings:
         RPI set inside the epsilon-enlarged bounding box of ``F(alpha, s)``;
         it contains the minimal RPI set and has few facets in any dimension.
         ``auto``: zonotope for 2-D factors, maximal otherwise.
+    extra_levels : int
+        One-step sets computed beyond the first level where condition (8)
+        holds.  Larger domains let a vehicle aim at a waypoint from further
+        away and so drive faster between waypoints (its tube is larger while
+        it does); 0 is the paper's minimal family.
     structure : {"auto", "full"}
         ``auto`` works on decoupled factors (products of low-dimensional sets);
         ``full`` uses the general n-D path on the whole state.
@@ -57,6 +62,7 @@ class SynthesisSettings:
     epsilon: float = 0.05
     max_levels: int = 200
     terminal_method: Literal["auto", "zonotope", "maximal"] = "auto"
+    extra_levels: int = 0
     structure: Literal["auto", "full"] = "auto"
     cache: bool = True
     cache_dir: Path | None = None
@@ -71,13 +77,15 @@ class SynthesisSettings:
         if self.terminal_method not in ("auto", "zonotope", "maximal"):
             raise SettingsError("SynthesisSettings.terminal_method: must be 'auto', 'zonotope' or "
                                 f"'maximal', got {self.terminal_method!r}")
+        if not isinstance(self.extra_levels, int) or self.extra_levels < 0:
+            raise SettingsError(f"SynthesisSettings.extra_levels: must be an integer >= 0, got {self.extra_levels!r}")
         if self.structure not in STRUCTURES:
             raise SettingsError(f"SynthesisSettings.structure: must be one of {STRUCTURES}, got {self.structure!r}")
 
     def key(self) -> str:
         """The part of the cache key that depends on the settings."""
         return f"q{self.q_weight:g}-r{self.r_weight:g}-e{self.epsilon:g}-L{self.max_levels}-" \
-               f"T{self.terminal_method}-{self.structure}"
+               f"T{self.terminal_method}-{self.structure}-x{self.extra_levels}"
 
 
 @dataclass(frozen=True)

@@ -36,7 +36,7 @@ from controllers.models import VehicleModel, decoupled_blocks
 from controllers.polytope import Polytope
 from controllers.settings import SynthesisSettings, default_cache_dir
 
-__all__ = ["SynthesisError", "FactorSets", "SetFamily", "synthesize", "lqr_gain",
+__all__ = ["SynthesisError", "FactorSets", "SetFamily", "synthesize", "lqr_gain", "rotate_pairs",
            "terminal_set", "one_step_set"]
 
 CACHE_VERSION = "1"
@@ -141,6 +141,7 @@ class SetFamily:
         """Plain-data description (for ``muvsim sets``)."""
         return {
             "class_model": self.model.name,
+            "frame": self.model.frame,
             "N": self.N,
             "condition8": self.condition8,
             "facets": self.facet_counts(),
@@ -283,6 +284,52 @@ def _condition8_margin(T: Polytope, T0: Polytope, pos: np.ndarray, delta: float)
     return T.b - (delta * np.linalg.norm(a_pos, axis=1) + T0.support(T.A))
 
 
+def rotate_pairs(X: np.ndarray, angle) -> np.ndarray:
+    """Rotate every (x, y) coordinate pair of the rows of ``X`` by ``angle`` (rad, per row or scalar)."""
+    X = np.asarray(X, dtype=float)
+    c, s = np.cos(angle), np.sin(angle)
+    c = np.asarray(c)[..., None]
+    s = np.asarray(s)[..., None]
+    x, y = X[..., 0::2], X[..., 1::2]
+    rx, ry = c * x - s * y, s * x + c * y
+    out = np.empty(rx.shape[:-1] + (X.shape[-1],))
+    out[..., 0::2] = rx
+    out[..., 1::2] = ry
+    return out
+
+
+def _road_condition_margin(model: VehicleModel, factors_T: list, factors_T0: list, states: list,
+                           step_deg: float = 0.5) -> float:
+    """Worst slack of the road-frame switching condition (the analogue of (8)).
+
+    In the frame of waypoint ``k+1`` (x along the segment ``r_k -> r_{k+1}``) a state of
+    ``T^0(r_k)`` is ``R(dθ) e - (d, 0, 0, ...)`` with ``e ∈ T^0``, ``0 < d <= delta`` and
+    ``|dθ| <= turn_max``.  Checked on the corners of T^0's bounding box (a superset), both
+    ends of the offset segment (T^N is convex) and a grid of angles with a margin of
+    ``|corner| * step / 2`` for the angles in between: sound, slightly conservative.
+    Returns min over facets of slack minus margin (>= 0 means the condition holds).
+    """
+    n = model.n
+    lo, hi = np.zeros(n), np.zeros(n)
+    for st, T0 in zip(states, factors_T0):
+        V = T0.vertices
+        lo[st], hi[st] = V.min(axis=0), V.max(axis=0)
+    corners = np.array(np.meshgrid(*[[a, b] for a, b in zip(lo, hi)], indexing="ij")).reshape(n, -1).T
+    h = np.radians(step_deg)
+    turn = np.radians(model.turn_max_deg)
+    angles = np.arange(-turn, turn + h / 2, h) if turn > 0 else np.zeros(1)
+    rot = rotate_pairs(corners[None, :, :], angles[:, None]).reshape(-1, n)
+    shift = np.zeros(n)
+    shift[0] = -model.delta
+    pts = np.vstack([rot, rot + shift])
+    margin = float(np.linalg.norm(corners, axis=1).max()) * h / 2 if turn > 0 else 0.0
+    worst = np.inf
+    for st, T in zip(states, factors_T):
+        slack = T.b[None, :] - pts[:, st] @ T.A.T
+        worst = min(worst, float(slack.min()))
+    return worst - margin
+
+
 def _synthesize_factor(model: VehicleModel, states: np.ndarray, inputs: np.ndarray,
                        settings: SynthesisSettings):
     A = model.A[np.ix_(states, states)]
@@ -361,14 +408,26 @@ def synthesize(model: VehicleModel, settings: SynthesisSettings | None = None) -
             levels[k].append(T)
             tildes[k].append(T - D)
             pos = np.nonzero(states < 2)[0]
-            if np.any(_condition8_margin(T, T0, pos, model.delta) < -tol.VERIFY_TOL):
+            if model.frame == "world" and np.any(_condition8_margin(T, T0, pos, model.delta) < -tol.VERIFY_TOL):
                 ok = False
+        if model.frame == "road":
+            ok = _road_condition_margin(model, [lv[-1] for lv in levels], [lv[0] for lv in levels],
+                                        [p[0] for p in prepared]) >= -tol.VERIFY_TOL
         if ok:
             N = l
             break
+    if N is not None:
+        for _ in range(settings.extra_levels):
+            for k, (states, inputs, A, B, K, X, U, D, T0, info) in enumerate(prepared):
+                T = one_step_set(tildes[k][-1], A, B, U, X)
+                levels[k].append(T)
+                tildes[k].append(T - D)
+            N += 1
     if N is None:
         raise SynthesisError(
-            f"condition (8) (T^N ⊇ B_delta ⊕ T^0 with delta={model.delta}) does not hold within "
+            f"condition (8) (T^N ⊇ B_delta ⊕ T^0 with delta={model.delta}"
+            f"{', road frame, turns up to %g deg' % model.turn_max_deg if model.frame == 'road' else ''}) "
+            f"does not hold within "
             f"max_levels={settings.max_levels} one-step sets: reduce delta or the disturbance, "
             f"raise the input bound, or raise max_levels")
     factors = []

@@ -38,6 +38,13 @@ PROXSUITE_EPS_PRIMAL_INF = 1e-9
 #: (m/s^2 or m/s^3).  Strictly convex 1-2 variable QPs: answers are unique.
 SOLVER_AGREEMENT_TOL = 1e-5
 
+#: proxsuite's answers agree with the exact minimiser only to this (m/s^2): on these
+#: ill-conditioned 2-variable QPs (Hessian B'B ~ 1e-2) it stops at feasible points up to
+#: 1.7e-2 away (measured: drag model; 1.5e-3 on the car class).  Tighter eps_abs does not
+#: help and scaling the cost makes it report false infeasibility.  Its answers are still
+#: checked feasible; the default solver is the exact one.
+PROXSUITE_AGREEMENT_TOL = 2e-2
+
 #: Geometric separation below which two footprints count as touching (m).
 #: Positive separation is required by the paper; 1e-9 m absorbs round-off.
 GEOMETRY_TOL = 1e-9

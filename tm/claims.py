@@ -87,13 +87,25 @@ class Claims:
         """Bounding boxes ``(lo, hi)`` of the union claims; they contain every ``timed`` polygon too."""
         rows = self.table.rows(self.family, np.maximum(self.index - 1, 0))
         e = self._half_extent()
-        return self.centre + self.table.lo[rows] - e, self.centre + self.table.hi[rows] + e
+        lo, hi = self.table.lo[rows].copy(), self.table.hi[rows].copy()
+        rot = self.table.rotate[self.family]
+        if rot.any():  # road-frame sets turn with the heading: box of the rotated hull
+            P = _rotate(self.table.hulls[rows[rot]], self.heading[rot])
+            lo[rot], hi[rot] = P.min(axis=1), P.max(axis=1)
+        return self.centre + lo - e, self.centre + hi + e
 
     def _polygons(self, stack: np.ndarray, level: np.ndarray, idx) -> np.ndarray:
         sel = slice(None) if idx is None else idx
-        rows = self.table.rows(self.family[sel], level[sel])
-        rect = rectangles(self.heading[sel], self.length[sel], self.width[sel])
-        return minkowski_sum(stack[rows], rect) + self.centre[sel][:, None, :]
+        fam = self.family[sel]
+        rows = self.table.rows(fam, level[sel])
+        heading = self.heading[sel]
+        rect = rectangles(heading, self.length[sel], self.width[sel])
+        sets = stack[rows]
+        rot = self.table.rotate[fam]
+        if rot.any():
+            sets = sets.copy()
+            sets[rot] = _rotate(sets[rot], heading[rot])
+        return minkowski_sum(sets, rect) + self.centre[sel][:, None, :]
 
     def polygons(self, idx=None) -> np.ndarray:
         """Union claim polygons ``c + H^{max(l-1,0)} ⊕ R(θ)``, shape (n, K, 2)."""
@@ -104,6 +116,13 @@ class Claims:
         if k < 1:
             raise ValueError(f"polygons_at: k must be >= 1, got {k}")
         return self._polygons(self.table.levels, np.maximum(self.index - k, 0), idx)
+
+
+def _rotate(P: np.ndarray, heading: np.ndarray) -> np.ndarray:
+    """Rotate polygons ``(n, K, 2)`` about the origin by ``heading (n,)`` (CCW order is kept)."""
+    c, s = np.cos(heading)[:, None], np.sin(heading)[:, None]
+    x, y = P[..., 0], P[..., 1]
+    return np.stack([c * x - s * y, s * x + c * y], axis=-1)
 
 
 def claim_conflicts(claims: Claims, i, j, check: str = "union", tol: float = GEOMETRY_TOL) -> np.ndarray:

@@ -65,6 +65,9 @@ class FamilyTable:
         Bounding box of ``H^l`` (contains the box of every ``P^m``, ``m <= l``).
     nested : ndarray of bool, shape (F,)
         Whether ``P^l ⊆ P^{l+1}`` for every level (within CONTAINMENT_TOL).
+    rotate : ndarray of bool, shape (F,)
+        Families whose sets are expressed in the vehicle's road frame: a claim
+        rotates them by its heading (like the footprint).
     """
 
     keys: tuple
@@ -75,9 +78,12 @@ class FamilyTable:
     lo: np.ndarray
     hi: np.ndarray
     nested: np.ndarray
+    rotate: np.ndarray | None = None
 
     def __post_init__(self) -> None:
-        for name in ("offset", "n_levels", "levels", "hulls", "lo", "hi", "nested"):
+        if self.rotate is None:
+            object.__setattr__(self, "rotate", np.zeros(len(self.keys), dtype=bool))
+        for name in ("offset", "n_levels", "levels", "hulls", "lo", "hi", "nested", "rotate"):
             getattr(self, name).flags.writeable = False
 
     def family_index(self, family) -> np.ndarray:
@@ -100,13 +106,15 @@ class FamilyTable:
         return self.offset[family] + index
 
 
-def build_family_table(families: Mapping[str, Sequence[np.ndarray]]) -> FamilyTable:
+def build_family_table(families: Mapping[str, Sequence[np.ndarray]], rotating=()) -> FamilyTable:
     """Validate families and stack them into a :class:`FamilyTable`.
 
     Parameters
     ----------
     families : mapping of str to sequence of array_like (k_l, 2)
         Per family key, the CCW convex polygons ``P^0 .. P^N``.
+    rotating : collection of str
+        Keys of road-frame families (rotated by each claim's heading).
 
     Raises
     ------
@@ -149,4 +157,5 @@ def build_family_table(families: Mapping[str, Sequence[np.ndarray]]) -> FamilyTa
     H = pad_polygons(hulls)
     return FamilyTable(keys=tuple(keys), offset=np.concatenate([[0], np.cumsum(n_levels)[:-1]]).astype(np.intp),
                        n_levels=n_levels, levels=pad_polygons(levels), hulls=H,
-                       lo=H.min(axis=1), hi=H.max(axis=1), nested=np.array(nested, dtype=bool))
+                       lo=H.min(axis=1), hi=H.max(axis=1), nested=np.array(nested, dtype=bool),
+                       rotate=np.array([k in set(rotating) for k in keys], dtype=bool))

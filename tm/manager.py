@@ -347,6 +347,8 @@ class TrafficManager:
     families : mapping of str to sequence of ndarray (k_l, 2)
         Per vehicle class key, CCW convex position sets ``P^0 .. P^N``
         centred at the origin (the 2-D projections of the ST-MPC sets).
+    rotating : collection of str
+        Keys of road-frame families: their sets turn with each claim's heading.
 
     Notes
     -----
@@ -364,11 +366,12 @@ class TrafficManager:
     ``greedy`` policy has no such bound.
     """
 
-    def __init__(self, settings: TMSettings, families: Mapping[str, Sequence[np.ndarray]]) -> None:
+    def __init__(self, settings: TMSettings, families: Mapping[str, Sequence[np.ndarray]],
+                 rotating=()) -> None:
         if not isinstance(settings, TMSettings):
             raise TypeError(f"settings: must be a TMSettings, got {type(settings).__name__}")
         self.settings = settings
-        self.table = build_family_table(families)
+        self.table = build_family_table(families, rotating)
         self._rng = np.random.default_rng(settings.seed)
         self._waited: dict[str, int] = {}
 

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from controllers.classes import get_class
-from controllers.models import jerk_integrator
+from controllers.models import drag_integrator, jerk_integrator
 from controllers.settings import SynthesisSettings
 from controllers.synthesis import synthesize
 

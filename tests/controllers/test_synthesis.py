@@ -15,7 +15,7 @@ from controllers.models import double_integrator
 from controllers.polytope import Polytope
 from controllers.settings import SynthesisSettings
 from controllers.stmpc import STMPC
-from controllers.synthesis import SynthesisError, one_step_set, synthesize
+from controllers.synthesis import SynthesisError, one_step_set, rotate_pairs, synthesize
 
 
 def test_terminal_set_is_robust_invariant_with_constraints_met(family):
@@ -55,20 +55,33 @@ def test_one_step_property_and_nesting(family):
 
 
 def test_condition_7_for_waypoints_delta_apart(family):
-    """Every vertex of T^0(r) lies in the domain of attraction of a waypoint δ away, any direction."""
+    """Every vertex of T^0(r) lies in the domain of attraction of a waypoint up to δ away: in any
+    direction (world frame), or along the next segment after a turn of at most turn_max_deg
+    (road frame, the state rotating with the frame)."""
     ctl = STMPC(family)
     rng = np.random.default_rng(7)
     V0 = family.vertices(0)
     if len(V0) > 3000:  # all combinations of factor vertices: keep a random 3000
         V0 = V0[rng.choice(len(V0), 3000, replace=False)]
+    m = family.model
     for theta in rng.uniform(0, 2 * np.pi, size=12):
-        r_next = family.model.delta * np.array([np.cos(theta), np.sin(theta)])
-        l_next = ctl.index(V0, np.tile(r_next, (len(V0), 1)))
+        if m.frame == "world":
+            r_next = m.delta * np.array([np.cos(theta), np.sin(theta)])
+            l_next = ctl.index(V0, np.tile(r_next, (len(V0), 1)))
+        else:  # current segment heading theta, next turns by up to the bound, waypoint d <= delta ahead
+            turn = np.radians(rng.uniform(-m.turn_max_deg, m.turn_max_deg))
+            d = rng.uniform(0.1, 1.0) * m.delta
+            X = rotate_pairs(V0, theta)  # world coordinates of T^0(0) in the frame of theta
+            h_next = theta + turn
+            r_next = d * np.array([np.cos(h_next), np.sin(h_next)])
+            l_next = ctl.index(X, np.tile(r_next, (len(X), 1)), np.full(len(X), h_next))
         assert np.all(l_next <= family.N)
 
 
 def test_condition_8_holds_exactly_per_facet(family):
     """T^N ⊇ B_δ ⊕ T^0: support-function check on every facet of T^N (factors)."""
+    if family.model.frame == "road":
+        pytest.skip("road-frame families use the turn condition, tested in test_condition_7")
     d = family.model.delta
     for f in family.factors:
         TN, T0 = f.levels[family.N], f.levels[0]
