@@ -105,3 +105,35 @@ def test_invalid_waypoints_named():
     spec = VehicleSpec(id="bad", vclass="paper-c", waypoints=np.array([[0.0, 0.0], [50.0, 0.0]]))
     with pytest.raises(ValueError, match="vehicle bad: waypoints 0 and 1 are 50.000 m apart"):
         Cosim(CLASSES, [spec], CosimSettings())
+
+
+def test_admission_respects_where_vehicles_are_now():
+    """A new vehicle appears now: its tube must miss the others' current sets P^l, not only
+    their claims from the next step on (P^{l-1}).  (Found by the monitor on a SUMO grid.)"""
+    cls = "paper-c"
+    vc = CLASSES[cls]
+    a = VehicleSpec(id="A", vclass=cls, waypoints=subsample(np.array([[0.0, 0.0], [60.0, 0.0]]), vc.model.delta))
+    sim = Cosim(CLASSES, [a], CosimSettings(disturbance="none"))
+    sim._admit(0.0)
+    fam, g = sim.families[cls], sim.groups[cls]
+    L = 10
+    V = fam.vertices(L)
+    g.X[0] = V[np.argmax(V[:, 0])]  # a state of T^L at its front-most position
+    g.l[0] = sim.groups[cls].ctl.index(g.X[:1], g.W[0][:1])[0]
+    assert g.l[0] == L
+    PL, PL1, P0 = (float(fam.position_sets[i][:, 0].max()) for i in (L, L - 1, 0))
+    assert PL - PL1 > 0.2
+    half = vc.length / 2
+    # overlaps P^L + footprint by 0.1 m, clear of P^{L-1} + footprint
+    x_in = PL + half + P0 + half - 0.1
+    x_out = PL + half + P0 + half + 0.1
+    for x, admitted in ((x_in, False), (x_out, True)):
+        b = VehicleSpec(id=f"B{x:.1f}", vclass=cls, depart_s=0.0,
+                        waypoints=subsample(np.array([[x, 0.0], [x + 30.0, 0.0]]), vc.model.delta))
+        sim.pending.append(b)
+        sim.records[b.id] = type(sim.records["A"])(b.id, cls, 0.0, b.route_length_m)
+        n = sim._admit(0.0)
+        assert (n == 1) == admitted
+        if admitted:
+            break
+        sim.pending.remove(b)
