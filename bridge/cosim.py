@@ -283,6 +283,34 @@ class Cosim:
         """(V, Z) bool: claim boxes that meet zone guard boxes."""
         return np.all((lo[:, None, :] <= self.zone_hi[None]) & (hi[:, None, :] >= self.zone_lo[None]), axis=2)
 
+    def _exit_free(self, vid: str, z: int, pos: dict, cur_lo: np.ndarray, cur_hi: np.ndarray) -> bool:
+        """Whether the first waypoint of ``vid``'s route beyond zone ``z``'s guard is free.
+
+        The slot is the box around that waypoint that the vehicle's hold region would need
+        (its class's largest ``P^0`` extent plus its footprint's half diagonal); free means no
+        other vehicle's current claim box meets it.
+        """
+        for g in self.groups.values():
+            if vid in g.ids:
+                break
+        j = g.ids.index(vid)
+        W, k = g.W[j], int(g.k[j])
+        r0 = float(np.abs(self.families[g.vclass.name].position_sets[0]).max()) \
+            + 0.5 * float(np.hypot(g.vclass.length, g.vclass.width))
+        lo_z, hi_z = self.zone_lo[z], self.zone_hi[z]
+        inside = np.all((W - r0 <= hi_z) & (W + r0 >= lo_z), axis=1)
+        if not inside[k + 1:].any():
+            return True  # the route does not cross the guard beyond here
+        first_in = k + 1 + int(np.argmax(inside[k + 1:]))
+        out = np.nonzero(~inside[first_in:])[0]
+        if len(out) == 0:
+            return True  # the route ends inside the guard: it arrives there
+        e = first_in + int(out[0])
+        lo, hi = W[e] - r0, W[e] + r0
+        hit = np.all((cur_lo <= hi) & (cur_hi >= lo), axis=1)
+        hit[pos[vid]] = False
+        return not hit.any()
+
     def _gate(self, state: FleetState) -> FleetState:
         """Withhold requests into a zone guard whose token another vehicle holds (see :class:`Zone`)."""
         cur_lo, cur_hi = self.tm.claims(state).aabb()
@@ -305,8 +333,13 @@ class Cosim:
                 self.zone_wait.setdefault((z, v), self.t)
             holder = self.zone_holder[z]
             if holder is None and cand:
-                holder = min(cand, key=lambda v: (self.zone_wait[(z, v)], v))
-                self.zone_holder[z] = holder
+                # first come, first served -- among those with room beyond the zone (do not
+                # block the box: a holder stuck in a queue inside the guard would stall everyone)
+                for v in sorted(cand, key=lambda v: (self.zone_wait[(z, v)], v)):
+                    if self._exit_free(v, z, pos, cur_lo, cur_hi):
+                        holder = v
+                        self.zone_holder[z] = v
+                        break
             for v in cand:
                 if v != holder:
                     req[pos[v]] = False
