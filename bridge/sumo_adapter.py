@@ -205,6 +205,38 @@ class SumoAdapter:
             return (mod.TraCIException, mod.FatalTraCIError)
         return (mod.exceptions.TraCIException, mod.exceptions.FatalTraCIError, ConnectionError, OSError)
 
+    def run_native(self, sumocfg: str | os.PathLike, *, duration_s: float, seed: int,
+                   tripinfo_path: str | os.PathLike) -> dict:
+        """Run a configuration with SUMO's own drivers (no override): the ``--baseline sumo``.
+
+        Same collision options as :meth:`start`; returns steps, unique collision pairs and
+        the run's simulated seconds.  Raises :class:`SumoError` on SUMO's errors.
+        """
+        mod = self._backend_module()
+        errors = self._errors(mod)
+        args = ["sumo", "-c", str(sumocfg), "--step-length", "0.1", "--seed", str(seed),
+                "--collision.action", "warn", "--collision.check-junctions", "true",
+                "--collision.mingap-factor", "0", "--tripinfo-output", str(tripinfo_path),
+                "--no-step-log", "true", "--end", str(duration_s)]
+        pairs: set = set()
+        steps = 0
+        try:
+            mod.start(args)
+            while mod.simulation.getTime() < duration_s and (
+                    steps == 0 or mod.simulation.getMinExpectedNumber() > 0):
+                mod.simulationStep()
+                steps += 1
+                for c in mod.simulation.getCollisions():
+                    pairs.add(tuple(sorted((c.collider, c.victim))))
+        except errors as exc:
+            raise SumoError(f"SUMO failed running {sumocfg} with its own drivers: {exc}") from None
+        finally:
+            try:
+                mod.close()
+            except errors:
+                pass
+        return {"steps": steps, "collision_pairs": sorted(pairs), "simulated_s": round(steps * 0.1, 3)}
+
     def start(self, sumocfg: str | os.PathLike | None = None, *, net: str | os.PathLike | None = None,
               routes: str | os.PathLike | Sequence[str | os.PathLike] | None = None, step_length: float = 0.1,
               seed: int | None = None, gui: bool = False, tripinfo_path: str | os.PathLike | None = None,

@@ -123,7 +123,7 @@ def run_sumo(target: str, out: Path, opts) -> dict:
         _write_summary(out, summary)
         tripinfo = out / "tripinfo.xml"
         if opts.baseline == "sumo":
-            return _run_baseline(sumocfg, tripinfo, seed, duration, out, summary, t0, opts)
+            return _run_baseline(adapter, sumocfg, tripinfo, seed, duration, out, summary, t0)
         demand = adapter.start(sumocfg, tripinfo_path=tripinfo, seed=seed, gui=opts.gui)
         classes = builtin_classes()
         cls_of = _classes_for(scenario, demand, classes)
@@ -183,34 +183,15 @@ def run_sumo(target: str, out: Path, opts) -> dict:
     return summary
 
 
-def _run_baseline(sumocfg, tripinfo, seed, duration, out, summary, t0, opts) -> dict:
+def _run_baseline(adapter: SumoAdapter, sumocfg, tripinfo, seed, duration, out, summary, t0) -> dict:
     """The same demand driven by SUMO's own drivers (no muvsim control)."""
-    import libsumo
-
-    from sumo_nets.sumo_tools import sumo_home  # noqa: F401  (SUMO located by the adapter's rules)
-
-    args = ["sumo", "-c", str(sumocfg), "--step-length", "0.1", "--seed", str(seed),
-            "--collision.action", "warn", "--collision.check-junctions", "true",
-            "--collision.mingap-factor", "0", "--tripinfo-output", str(tripinfo), "--no-step-log", "true",
-            "--end", str(duration)]
-    libsumo.start(args)
-    pairs = set()
-    steps = 0
-    try:
-        while libsumo.simulation.getTime() < duration and (
-                libsumo.simulation.getMinExpectedNumber() > 0 or steps == 0):
-            libsumo.simulationStep()
-            steps += 1
-            for c in libsumo.simulation.getCollisions():
-                pairs.add(tuple(sorted((c.collider, c.victim))))
-    finally:
-        libsumo.close()
+    res = adapter.run_native(sumocfg, duration_s=duration, seed=seed, tripinfo_path=tripinfo)
     wall = time.perf_counter() - t0
     trips = ET.parse(tripinfo).getroot().findall("tripinfo")
     durations = [float(t.get("duration")) for t in trips]
-    summary.update(complete=True, steps=steps, simulated_s=round(steps * 0.1, 3), collisions_sumo=len(pairs),
-                   vehicles_arrived=len(trips),
+    summary.update(complete=True, steps=res["steps"], simulated_s=res["simulated_s"],
+                   collisions_sumo=len(res["collision_pairs"]), vehicles_arrived=len(trips),
                    mean_travel_time_s=float(np.mean(durations)) if durations else None,
-                   rtf=round(steps * 0.1 / wall, 3), wall_s=round(wall, 3))
+                   rtf=round(res["simulated_s"] / wall, 3), wall_s=round(wall, 3))
     _write_summary(out, summary)
     return summary
