@@ -197,8 +197,14 @@ class Cosim:
     """
 
     def __init__(self, classes, specs, settings: CosimSettings, world=None,
-                 synthesis: SynthesisSettings | None = None, zones: list[Zone] | None = None):
+                 synthesis: SynthesisSettings | None = None, zones: list[Zone] | None = None,
+                 observers: list | None = None):
         self.settings = settings
+        #: Objects with ``on_step(sim, state, decision, row)``, called at the end of every
+        #: step (``state``: the FleetState the TM decided on, or None with no vehicle;
+        #: ``decision``: the TM's Decision or None; ``row``: the step's KPI row).
+        #: Loggers (MCAP) and KPI accumulators attach here.
+        self.observers = list(observers or [])
         self.world = world or FreePlaneWorld()
         used = sorted({s.vclass for s in specs})
         missing = [c for c in used if c not in classes]
@@ -441,6 +447,8 @@ class Cosim:
                    denials=n_req - n_go, admitted=admitted, tm_ms=round(ms_tm, 4),
                    controller_ms=round(ms_ctl, 4), world_ms=round((time.perf_counter() - tw) * 1e3, 4))
         self.step_rows.append(row)
+        for obs in self.observers:
+            obs.on_step(self, state, self.last_decision if state is not None else None, row)
         return row
 
     def _admit(self, t_s: float) -> int:
