@@ -10,10 +10,8 @@ if ! "$PY" -c 'import sys, venv, ensurepip; assert sys.version_info >= (3, 11)' 
         PY=python3
     fi
 fi
-# SUMO's binaries from the eclipse-sumo wheel link against these system libraries.
-if command -v apt-get >/dev/null 2>&1 && ! ldconfig -p 2>/dev/null | grep -q libxerces-c; then
-    : # the wheels ship their own libraries; nothing to install (checked on Debian 12)
-fi
+# SUMO (sumo, netgenerate, duarouter, libsumo) comes from the eclipse-sumo / libsumo wheels,
+# which ship their own libraries: no system package is needed for it.
 [ -x .venv/bin/python ] || "$PY" -m venv .venv
 .venv/bin/python -m pip install -q --upgrade pip
 .venv/bin/python -m pip install -q -e '.[test]'
