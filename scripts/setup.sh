@@ -10,8 +10,13 @@ if ! "$PY" -c 'import sys, venv, ensurepip; assert sys.version_info >= (3, 11)' 
         PY=python3
     fi
 fi
-# SUMO (sumo, netgenerate, duarouter, libsumo) comes from the eclipse-sumo / libsumo wheels,
-# which ship their own libraries: no system package is needed for it.
+# SUMO (sumo, netgenerate, duarouter, libsumo) comes from the eclipse-sumo / libsumo wheels.
 [ -x .venv/bin/python ] || "$PY" -m venv .venv
 .venv/bin/python -m pip install -q --upgrade pip
 .venv/bin/python -m pip install -q -e '.[test]'
+# On a slimmer image SUMO's binaries may miss X11/GL/expat client libraries: install them.
+SUMO_BIN=$(.venv/bin/python -c 'import os, sumo; print(os.path.join(sumo.SUMO_HOME, "bin", "sumo"))')
+if ldd "$SUMO_BIN" 2>/dev/null | grep -q "not found" && command -v apt-get >/dev/null 2>&1; then
+    apt-get update -qq && apt-get install -y -qq libx11-6 libxext6 libxrender1 libgl1 libexpat1 \
+        libxcb1 libbsd0 zlib1g >/dev/null
+fi
