@@ -14,6 +14,7 @@ from tm.settings import TMSettings
 
 CLASSES = builtin_classes()
 PAPER = ["paper-a", "paper-b", "paper-c", "paper-d"]
+MIXED = PAPER + ["car", "bus", "truck"]  # world- and road-frame classes together
 
 
 def _opts(**kw):
@@ -30,7 +31,7 @@ def scenarios(draw):
     rng = np.random.default_rng(seed)
     specs = []
     for i in range(n):
-        c = draw(st.sampled_from(PAPER))
+        c = draw(st.sampled_from(MIXED))
         a, b = rng.uniform(-40, 40, size=(2, 2))
         if np.linalg.norm(b - a) < 10:
             b = a + np.array([15.0, 0.0])
@@ -44,7 +45,7 @@ def scenarios(draw):
     return specs, opts
 
 
-@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(scenarios())
 def test_no_footprint_overlap_and_no_invariant_violation(scenario):
     """Random vehicles, paths, departures, disturbance policies, TM policies, checks and switching
