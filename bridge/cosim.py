@@ -216,11 +216,20 @@ class Cosim:
             if W.ndim != 2 or W.shape[1] != 2 or len(W) < 2:
                 raise ValueError(f"vehicle {s.id}: waypoints must be (K >= 2, 2), got {W.shape}")
             gaps = np.linalg.norm(np.diff(W, axis=0), axis=1)
-            delta = self.classes[s.vclass].model.delta
+            model = self.classes[s.vclass].model
+            delta = model.delta
             if np.any(gaps > delta + 1e-9):
                 i = int(np.argmax(gaps))
                 raise ValueError(f"vehicle {s.id}: waypoints {i} and {i + 1} are {gaps[i]:.3f} m apart; "
                                  f"class {s.vclass!r} needs at most delta = {delta} m")
+            if model.frame == "road" and len(W) > 2:
+                h = _headings(W)[1:]
+                turn = np.degrees(np.abs((np.diff(h) + np.pi) % (2 * np.pi) - np.pi))
+                if np.any(turn > model.turn_max_deg + 1e-6):
+                    i = int(np.argmax(turn))
+                    raise ValueError(
+                        f"vehicle {s.id}: its route turns by {turn[i]:.1f} deg at waypoint {i + 1}; class "
+                        f"{s.vclass!r} (road frame) accepts at most {model.turn_max_deg} deg between segments")
         if len({s.id for s in specs}) != len(specs):
             raise ValueError("vehicle ids must be unique")
         cs = ControllerSettings(solver=settings.solver, switching=settings.switching)

@@ -138,3 +138,10 @@ def test_admission_respects_where_vehicles_are_now():
         if admitted:
             break
         sim.pending.remove(b)
+
+
+def test_too_sharp_a_turn_for_a_road_frame_class_is_named():
+    W = np.array([[0.0, 0.0], [3.0, 0.0], [3.0, 3.0]])  # a 90 degree corner
+    spec = VehicleSpec(id="sharp", vclass="car", waypoints=W)
+    with pytest.raises(ValueError, match="vehicle sharp: its route turns by 90.0 deg at waypoint 1"):
+        Cosim(CLASSES, [spec], CosimSettings())

@@ -37,9 +37,8 @@ def test_same_seed_same_summary(grid_net, grid_routes, tmp_path):
                                                  disturbance="random"))
     b = run_sumo(str(cfg), tmp_path / "b", _opts(duration=20.0, tm="greedy", check="union", switching="early",
                                                  disturbance="random"))
-    for k in ("wall_s", "rtf", "scenario"):
-        a.pop(k), b.pop(k)
-    assert a == b
+    timing = lambda k: k in ("wall_s", "rtf", "scenario") or k.endswith("_ms")  # machine-dependent
+    assert {k: v for k, v in a.items() if not timing(k)} == {k: v for k, v in b.items() if not timing(k)}
 
 
 def test_junctions_are_zones(grid_net):
