@@ -5,6 +5,8 @@
     synthesis seconds and whether condition (8) holds.
 ``muvsim run [SCENARIO] --out DIR ...``
     Run a scenario and write ``DIR/summary.json`` plus per-step CSV.
+``muvsim report RUN_DIR [--vs OTHER_RUN_DIR] [--plots]``
+    KPI statistics of a run (or two, compared) into ``RUN_DIR/report.csv``.
 """
 
 from __future__ import annotations
@@ -79,13 +81,49 @@ def _cmd_run(args) -> int:
             print(f"muvsim run: {summary['error']}", file=sys.stderr)
     keys = ("scenario", "baseline", "steps", "vehicles", "vehicles_total", "vehicles_arrived", "finished",
             "collisions_sumo", "collisions_geometric", "invariant_violations", "constraint_violations",
-            "min_separation_m", "stop_commands", "mean_travel_time_s", "rtf", "wall_s", "error")
+            "min_separation_m", "stop_commands", "mean_travel_time_s", "mean_delay_s", "throughput_vph",
+            "rtf", "wall_s", "error")
     width = max(len(k) for k in keys)
     for k in keys:
         if k in summary:
             print(f"{k:<{width}}  {summary[k]}")
+    if (out / "steps.csv").exists() and not summary.get("baseline") == "sumo":
+        import pandas as pd
+
+        from analysis.kpis import timing_means
+
+        ms = timing_means(pd.read_csv(out / "steps.csv"))
+        print("ms per step".ljust(width) + "  " + ", ".join(f"{k[:-3]} {v:.3f}" for k, v in ms.items()))
     print(f"written: {out / 'summary.json'}")
+    if args.plots and (out / "summary.json").exists():
+        _write_plots(out)
     return 0 if summary.get("complete", True) else 1
+
+
+def _cmd_report(args) -> int:
+    from analysis.report import DemandMismatch, format_report, load_run, report_table
+
+    try:
+        a = load_run(args.run)
+        b = load_run(args.vs) if args.vs else None
+        df = report_table(a, b)
+    except (FileNotFoundError, DemandMismatch) as exc:
+        print(f"muvsim report: {exc}", file=sys.stderr)
+        return 2
+    print(format_report(df, a, b))
+    dest = Path(args.run) / "report.csv"
+    df.to_csv(dest, index=False)
+    print(f"written: {dest}")
+    if args.plots:
+        _write_plots(Path(args.run), Path(args.vs) if args.vs else None)
+    return 0
+
+
+def _write_plots(run: Path, vs: Path | None = None) -> None:
+    from analysis.plots import write_plots
+
+    for kind, path in write_plots(run, vs).items():
+        print(f"plot {kind}: {path}")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -114,7 +152,17 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--solver", choices=["exact", "daqp", "proxsuite"], default="exact")
     r.add_argument("--duration", type=float, default=None, help="simulated seconds (default: until done)")
     r.add_argument("--vehicles", type=int, default=8, help="vehicles in swap")
+    r.add_argument("--log", choices=["none", "summary", "full"], default="summary",
+                   help="run.mcap for Foxglove: none, summary (states, decisions; default) or full "
+                        "(+ claim polygons)")
+    r.add_argument("--plots", action="store_true", help="write plots into DIR/plots after the run")
     r.set_defaults(func=_cmd_run)
+    q = sub.add_parser("report", help="KPI statistics of a run, or two runs compared (report.csv)")
+    q.add_argument("run", metavar="RUN_DIR")
+    q.add_argument("--vs", metavar="OTHER_RUN_DIR", default=None,
+                   help="compare with this run (same demand): difference and ratio")
+    q.add_argument("--plots", action="store_true", help="also write plots into RUN_DIR/plots")
+    q.set_defaults(func=_cmd_report)
     return p
 
 

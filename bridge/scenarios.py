@@ -88,6 +88,8 @@ def run_scenario(name: str, out: Path, opts) -> dict:
 
 def run_multi(name: str, out: Path, opts, world=None, specs=None) -> dict:
     """Run a multi-vehicle scenario through :class:`bridge.cosim.Cosim`; write summary and CSVs."""
+    from analysis.mcap_log import observers_for
+    from analysis.outputs import close_observers, write_run_tables
     from bridge.cosim import Cosim, CosimSettings
     from bridge.layouts import crossing, paper10, swap
     from controllers.classes import ClassError, builtin_classes
@@ -113,11 +115,14 @@ def run_multi(name: str, out: Path, opts, world=None, specs=None) -> dict:
     _write_summary(out, summary)
     t0 = time.perf_counter()
     sim = None
+    observers: list = []
     try:
         settings = CosimSettings(tm=TMSettings(policy=opts.tm, check=opts.check, seed=opts.seed),
                                  switching=opts.switching, disturbance=opts.disturbance, solver=opts.solver,
                                  seed=opts.seed, duration_s=opts.duration)
-        sim = Cosim(classes, specs, settings, world=world, zones=zones)
+        observers = observers_for(out, getattr(opts, "log", None) or "none",
+                                  {"scenario": name, "seed": opts.seed, **options})
+        sim = Cosim(classes, specs, settings, world=world, zones=zones, observers=observers)
         max_steps = int(getattr(opts, "max_steps", 0) or 20000)
         sim.run(max_steps)
         summary["complete"] = True
@@ -127,30 +132,20 @@ def run_multi(name: str, out: Path, opts, world=None, specs=None) -> dict:
         summary.update(error=f"{type(exc).__name__}: {exc}", traceback=traceback.format_exc(limit=6))
     finally:
         summary["wall_s"] = round(time.perf_counter() - t0, 3)
+        log_errors = close_observers(observers)
+        if log_errors:
+            summary["log_error"] = "; ".join(log_errors)
         if sim is not None:
-            figures, steps, vehicles = kpi_tables(sim)
-            summary.update(figures)
-            steps.to_csv(out / "steps.csv", index=False)
-            vehicles.to_csv(out / "vehicles.csv", index=False)
+            summary.update(write_run_tables(out, sim))
         _write_summary(out, summary)
     return summary
 
 
 def kpi_tables(sim) -> tuple[dict, pd.DataFrame, pd.DataFrame]:
-    """Summary figures, the per-step table and the per-vehicle table of a (possibly partial) run."""
-    steps = pd.DataFrame(sim.step_rows)
-    recs = pd.DataFrame([{k: v for k, v in vars(r).items() if not k.startswith("_")}
-                         for r in sim.records.values()])
-    arrived = recs["arrived_s"].notna() if len(recs) else pd.Series(dtype=bool)
-    min_sep = float(steps["min_separation_m"].min()) if "min_separation_m" in steps and len(steps) else float("inf")
-    summary = {
-        "steps": int(sim.t), "simulated_s": round(sim.t * sim.settings.Ts, 3), "vehicles": int(len(recs)),
-        "vehicles_arrived": int(arrived.sum()), "finished": bool(len(recs)) and bool(arrived.all()),
-        "collisions_geometric": int(sim.monitor.footprint_overlaps),
-        "collisions_world": len(sim.collisions_world),
-        "invariant_violations": int(sim.invariant_violations + sim.monitor.claim_violations),
-        "constraint_violations": int(sim.constraint_violations),
-        "min_separation_m": min_sep,
-        "stop_commands": int(recs["denials"].sum()) if len(recs) else 0,
-    }
-    return summary, steps, recs
+    """Summary figures, the per-step table and the per-vehicle table of a (possibly partial) run.
+
+    Kept for callers of the loop; the tables are :func:`analysis.kpis.run_tables`'s.
+    """
+    from analysis.kpis import run_tables
+
+    return run_tables(sim)

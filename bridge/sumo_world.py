@@ -22,7 +22,10 @@ import numpy as np
 
 from bridge.cosim import Cosim, CosimSettings, VehicleSpec, Zone
 from bridge.pose import front_bumper, sumo_angle
-from bridge.scenarios import _write_summary, kpi_tables
+from analysis.kpis import baseline_vehicle_table, read_tripinfo
+from analysis.mcap_log import observers_for
+from analysis.outputs import close_observers, write_run_tables
+from bridge.scenarios import _write_summary
 from bridge.sumo_adapter import SumoAdapter, SumoError
 from bridge.waypoints import RouteError, load_net
 from controllers.classes import builtin_classes
@@ -100,6 +103,7 @@ def run_sumo(target: str, out: Path, opts) -> dict:
     _write_summary(out, summary)
     t0 = time.perf_counter()
     sim = None
+    observers: list = []
     adapter = SumoAdapter()
     try:
         if str(target).endswith(".sumocfg"):
@@ -137,7 +141,9 @@ def run_sumo(target: str, out: Path, opts) -> dict:
         world = SumoWorld(adapter, {pv.id: pv for pv in demand.vehicles}, routes)
         settings = CosimSettings(tm=TMSettings(policy=tm, check=check, seed=seed), switching=switching,
                                  disturbance=disturbance, solver=opts.solver, seed=seed, duration_s=duration)
-        sim = Cosim(classes, specs, settings, world=world, zones=junction_zones(net))
+        observers = observers_for(out, getattr(opts, "log", None) or "none",
+                                  {"scenario": str(target), "seed": seed, **summary["options"]})
+        sim = Cosim(classes, specs, settings, world=world, zones=junction_zones(net), observers=observers)
         bar = None
         if not getattr(opts, "quiet", False):
             from tqdm import tqdm
@@ -164,20 +170,17 @@ def run_sumo(target: str, out: Path, opts) -> dict:
             adapter.close()
         except Exception:  # pragma: no cover - a dead SUMO
             pass
+        log_errors = close_observers(observers)
+        if log_errors:
+            summary["log_error"] = "; ".join(log_errors)
         wall = time.perf_counter() - t0
         summary["wall_s"] = round(wall, 3)
         if sim is not None:
-            figures, steps, vehicles = kpi_tables(sim)
+            figures = write_run_tables(out, sim, out / "tripinfo.xml")
             summary.update(figures)
-            steps.to_csv(out / "steps.csv", index=False)
-            vehicles.to_csv(out / "vehicles.csv", index=False)
-            arrived = vehicles.dropna(subset=["arrived_s"]) if len(vehicles) else vehicles
             summary.update(
                 collisions_sumo=len(sim.collisions_world),
-                vehicles_total=len(vehicles),
-                vehicles_arrived=int(len(arrived)),
-                mean_travel_time_s=float((arrived["arrived_s"] - arrived["admitted_s"]).mean())
-                if len(arrived) else None,
+                vehicles_total=figures["vehicles"],
                 rtf=round(sim.t * sim.settings.Ts / wall, 3) if wall > 0 else None)
         _write_summary(out, summary)
     return summary
@@ -187,11 +190,16 @@ def _run_baseline(adapter: SumoAdapter, sumocfg, tripinfo, seed, duration, out, 
     """The same demand driven by SUMO's own drivers (no muvsim control)."""
     res = adapter.run_native(sumocfg, duration_s=duration, seed=seed, tripinfo_path=tripinfo)
     wall = time.perf_counter() - t0
-    trips = ET.parse(tripinfo).getroot().findall("tripinfo")
-    durations = [float(t.get("duration")) for t in trips]
+    vehicles = baseline_vehicle_table(read_tripinfo(tripinfo),
+                                      {c: vc.v_max for c, vc in builtin_classes().items()})
+    vehicles.to_csv(out / "vehicles.csv", index=False)
+    arrived = vehicles["arrival_s"].notna()
     summary.update(complete=True, steps=res["steps"], simulated_s=res["simulated_s"],
-                   collisions_sumo=len(res["collision_pairs"]), vehicles_arrived=len(trips),
-                   mean_travel_time_s=float(np.mean(durations)) if durations else None,
+                   collisions_sumo=len(res["collision_pairs"]), vehicles_arrived=int(arrived.sum()),
+                   mean_travel_time_s=float(vehicles["travel_time_s"].mean()) if arrived.any() else None,
+                   mean_delay_s=float(vehicles["delay_s"].mean()) if arrived.any() else None,
+                   throughput_vph=round(float(arrived.sum()) * 3600.0 / res["simulated_s"], 3)
+                   if res["simulated_s"] else None,
                    rtf=round(res["simulated_s"] / wall, 3), wall_s=round(wall, 3))
     _write_summary(out, summary)
     return summary
