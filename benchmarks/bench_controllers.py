@@ -43,21 +43,23 @@ def main(argv=None) -> pd.DataFrame:
             rng = np.random.default_rng(0)
             X = np.vstack([fam.sample(l, max(vehicles // (fam.N + 1), 1), rng) for l in range(fam.N + 1)])
             C = np.zeros((len(X), 2))
+            H = np.zeros(len(X))  # segment headings (road-frame classes); 0: frames coincide
             # time the QP on states that need it (l >= 1); the index on all states
-            Xq = X[STMPC(fam).index(X, C) > 0]
+            Xq = X[STMPC(fam).index(X, C, H) > 0]
             Cq = np.zeros((len(Xq), 2))
+            Hq = np.zeros(len(Xq))
             for solver in solvers:
                 ctl = STMPC(fam, ControllerSettings(solver=solver))
                 n = len(X) if solver == "exact" else min(len(X), 200)
                 idx_t, ctl_t = [], []
                 for _ in range(repeats):
                     t = time.perf_counter()
-                    l = ctl.index(X[:n], C[:n])
+                    l = ctl.index(X[:n], C[:n], H[:n])
                     idx_t.append(time.perf_counter() - t)
                     nq = min(n, len(Xq))
-                    lq = ctl.index(Xq[:nq], Cq[:nq])
+                    lq = ctl.index(Xq[:nq], Cq[:nq], Hq[:nq])
                     t = time.perf_counter()
-                    ctl.control(Xq[:nq], Cq[:nq], lq)
+                    ctl.control(Xq[:nq], Cq[:nq], lq, heading=Hq[:nq])
                     ctl_t.append((time.perf_counter() - t) / nq * n)
                 rows.append({
                     "class": name, "N": fam.N, "paper_N": PAPER_N.get(name), "facets_T0": fam.facet_counts()[0],
