@@ -31,7 +31,8 @@ def main(argv=None) -> pd.DataFrame:
             if args.quick and (check == "timed" or policy == "greedy"):
                 continue
             opts = SimpleNamespace(vclass="paper-a", tm=policy, check=check, switching=switching,
-                                   disturbance="random", solver="exact", duration=600.0, vehicles=n, seed=0)
+                                   disturbance="random", solver="exact", duration=60.0 if args.quick else 600.0,
+                                   vehicles=n, seed=0)
             s = run_multi(name, Path(tmp) / f"{name}-{check}-{switching}-{policy}", opts)
             rows.append({"scenario": name, "vehicles": s["vehicles"], "check": check, "switching": switching,
                          "policy": policy, "finished": s["finished"], "arrived": s["vehicles_arrived"],
