@@ -27,6 +27,13 @@ def _ecdf(ax, x, label):
         ax.step(x, np.arange(1, len(x) + 1) / len(x), where="post", label=f"{label} (n={len(x)})")
 
 
+def _legend(ax):
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(fontsize=7)
+    else:
+        ax.text(0.5, 0.5, "no vehicle arrived", transform=ax.transAxes, ha="center", va="center")
+
+
 def _trajectories(fig, states):
     ax = fig.add_subplot(111)
     for vid, g in states.groupby("id", sort=True):
@@ -105,7 +112,7 @@ def write_plots(run_dir, vs_dir=None) -> dict:
         _ecdf(ax, v.loc[v["arrival_s"].notna(), "delay_s"], label)
     ax.set_xlabel("delay = travel time - free-flow time (s)")
     ax.set_ylabel("fraction of arrived vehicles")
-    ax.legend(fontsize=7)
+    _legend(ax)
     save(fig, "delay")
     fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(10, 4))
     for label, v in runs:
@@ -116,6 +123,6 @@ def write_plots(run_dir, vs_dir=None) -> dict:
     ax2.set_xlabel("time stopped per vehicle (s)")
     for ax in (ax1, ax2):
         ax.set_ylabel("fraction of arrived vehicles")
-        ax.legend(fontsize=7)
+        _legend(ax)
     save(fig, "stops")
     return written

@@ -122,7 +122,12 @@ def _cmd_report(args) -> int:
 def _write_plots(run: Path, vs: Path | None = None) -> None:
     from analysis.plots import write_plots
 
-    for kind, path in write_plots(run, vs).items():
+    try:
+        written = write_plots(run, vs)
+    except FileNotFoundError as exc:
+        print(f"muvsim: no plots: {exc}", file=sys.stderr)
+        return
+    for kind, path in written.items():
         print(f"plot {kind}: {path}")
 
 

@@ -19,3 +19,13 @@ def test_a_plot_per_kind(tmp_path):
     # through the CLI; a run without run.mcap gets the distributions only
     assert main(["report", str(tmp_path / "b"), "--plots"]) == 0
     assert {p.stem for p in (tmp_path / "b" / "plots").glob("*.png")} == {"delay", "stops"}
+
+
+def test_run_plots_through_the_cli(tmp_path, capsys):
+    out = tmp_path / "p"
+    assert main(["run", "paper10", "--out", str(out), "--duration", "3", "--log", "full", "--plots"]) == 0
+    assert (out / "run.mcap").exists() and (out / "plots" / "trajectories.png").stat().st_size > 10_000
+    assert "ms per step" in capsys.readouterr().out
+    # `single` has no per-vehicle table: no plots, a message, no crash
+    assert main(["run", "single", "--out", str(tmp_path / "s"), "--duration", "2", "--plots"]) == 0
+    assert "no plots" in capsys.readouterr().err
