@@ -24,9 +24,12 @@ Definitions (all times in simulated seconds):
     travel time − free-flow time.
 ``stop_episodes``, ``time_stopped_s``
     a vehicle is *stopped* in a step in which the traffic manager denied its request
-    (it holds its waypoint); an episode is a maximal run of such steps.  For SUMO's
-    own drivers (baseline) the corresponding tripinfo figures are ``waitingCount`` and
-    ``waitingTime`` (speed below 0.1 m/s).
+    (it holds its waypoint); an episode is a maximal run of such steps.  Not defined for
+    SUMO's own drivers (NaN in a baseline's table).
+``halt_episodes``, ``time_halted_s``
+    speed at most 0.1 m/s after a step, except at the last waypoint
+    (:class:`analysis.halts.HaltCounter`); SUMO's ``waitingCount`` and ``waitingTime``
+    for a baseline, so the two compare.  NaN when the run had no counter.
 """
 
 from __future__ import annotations
@@ -43,7 +46,8 @@ __all__ = ["VEHICLE_COLUMNS", "STEP_COLUMNS", "vehicle_table", "step_table", "pe
 #: Columns of the per-vehicle table, in order.
 VEHICLE_COLUMNS = ("id", "vclass", "departure_s", "admitted_s", "admission_delay_s", "arrival_s",
                    "travel_time_s", "route_length_m", "free_flow_s", "delay_s", "sumo_time_loss_s", "denials",
-                   "stop_episodes", "time_stopped_s", "mean_speed_mps", "closest_m")
+                   "stop_episodes", "time_stopped_s", "halt_episodes", "time_halted_s", "mean_speed_mps",
+                   "closest_m")
 
 #: Columns of the per-step table every run has (others, e.g. ``min_separation_m``, are kept).
 STEP_COLUMNS = ("t_s", "active", "requests", "grants", "denials", "edges", "admitted", "tm_ms", "controller_ms",
@@ -76,7 +80,8 @@ def read_tripinfo(path) -> pd.DataFrame:
     return pd.DataFrame(rows, columns=cols)
 
 
-def vehicle_table(records, v_max: dict, Ts: float, tripinfo: pd.DataFrame | None = None) -> pd.DataFrame:
+def vehicle_table(records, v_max: dict, Ts: float, tripinfo: pd.DataFrame | None = None,
+                  halts=None) -> pd.DataFrame:
     """One row per vehicle from the loop's accumulators.
 
     Parameters
@@ -89,6 +94,8 @@ def vehicle_table(records, v_max: dict, Ts: float, tripinfo: pd.DataFrame | None
         Step length (s).
     tripinfo : DataFrame, optional
         :func:`read_tripinfo` of the run; fills ``sumo_time_loss_s`` for the trips it has.
+    halts : HaltCounter, optional
+        The run's :class:`analysis.halts.HaltCounter`; without it the halt columns are NaN.
 
     Returns
     -------
@@ -107,6 +114,8 @@ def vehicle_table(records, v_max: dict, Ts: float, tripinfo: pd.DataFrame | None
             "route_length_m": float(r.route_length_m), "free_flow_s": free, "delay_s": travel - free,
             "sumo_time_loss_s": np.nan, "denials": int(r.denials), "stop_episodes": int(r.stop_episodes),
             "time_stopped_s": int(r.stopped_steps) * Ts,
+            "halt_episodes": np.nan if halts is None else halts.episodes.get(r.id, 0),
+            "time_halted_s": np.nan if halts is None else halts.steps.get(r.id, 0) * Ts,
             "mean_speed_mps": float(r.speed_sum) / r.steps if r.steps else np.nan,
             "closest_m": float(r.closest_m),
         })
@@ -132,9 +141,9 @@ def baseline_vehicle_table(tripinfo: pd.DataFrame, v_max: dict, class_of=None) -
     Returns
     -------
     DataFrame
-        Columns :data:`VEHICLE_COLUMNS` (``denials`` 0, ``stop_episodes`` = waitingCount,
-        ``time_stopped_s`` = waitingTime, ``mean_speed_mps`` = route length / duration,
-        ``closest_m`` NaN).  Only trips SUMO finished are in its tripinfo.
+        Columns :data:`VEHICLE_COLUMNS` (``denials``, ``stop_episodes``, ``time_stopped_s`` and
+        ``closest_m`` NaN, ``halt_episodes`` = waitingCount, ``time_halted_s`` = waitingTime,
+        ``mean_speed_mps`` = route length / duration).  Only trips SUMO finished are in its tripinfo.
     """
     if class_of is None:
         def class_of(vt: str) -> str:
@@ -147,8 +156,8 @@ def baseline_vehicle_table(tripinfo: pd.DataFrame, v_max: dict, class_of=None) -
         "id": ti["id"], "vclass": vcl, "departure_s": ti["requested_depart_s"], "admitted_s": ti["depart_s"],
         "admission_delay_s": ti["depart_delay_s"], "arrival_s": ti["arrival_s"], "travel_time_s": ti["duration_s"],
         "route_length_m": ti["route_length_m"], "free_flow_s": free, "delay_s": ti["duration_s"] - free,
-        "sumo_time_loss_s": ti["time_loss_s"], "denials": 0, "stop_episodes": ti["waiting_count"],
-        "time_stopped_s": ti["waiting_time_s"],
+        "sumo_time_loss_s": ti["time_loss_s"], "denials": np.nan, "stop_episodes": np.nan,
+        "time_stopped_s": np.nan, "halt_episodes": ti["waiting_count"], "time_halted_s": ti["waiting_time_s"],
         "mean_speed_mps": ti["route_length_m"] / ti["duration_s"].where(ti["duration_s"] > 0),
         "closest_m": np.nan,
     }, columns=list(VEHICLE_COLUMNS))
@@ -207,8 +216,9 @@ def summarise(steps: pd.DataFrame, vehicles: pd.DataFrame, Ts: float) -> dict:
         ``steps, simulated_s, vehicles, vehicles_arrived, finished, collisions_geometric``
         (sum of per-step footprint overlaps), ``min_separation_m, stop_commands`` (denied
         requests), ``mean_travel_time_s, mean_delay_s, mean_admission_delay_s, stop_episodes,
-        time_stopped_s`` (totals), ``throughput_vph`` (arrivals per simulated hour).  Wall
-        times are not figures of the run (see :func:`timing_means`).
+        time_stopped_s, halt_episodes, time_halted_s`` (totals; halts None without a counter),
+        ``throughput_vph`` (arrivals per simulated hour).  Wall times are not figures of the
+        run (see :func:`timing_means`).
     """
     n = int(len(steps))
     arrived = vehicles["arrival_s"].notna() if len(vehicles) else pd.Series(dtype=bool)
@@ -233,6 +243,10 @@ def summarise(steps: pd.DataFrame, vehicles: pd.DataFrame, Ts: float) -> dict:
         "mean_admission_delay_s": mean(vehicles["admission_delay_s"]) if len(vehicles) else None,
         "stop_episodes": int(vehicles["stop_episodes"].sum()) if len(vehicles) else 0,
         "time_stopped_s": round(float(vehicles["time_stopped_s"].sum()), 6) if len(vehicles) else 0.0,
+        "halt_episodes": int(vehicles["halt_episodes"].sum())
+        if len(vehicles) and vehicles["halt_episodes"].notna().any() else None,
+        "time_halted_s": round(float(vehicles["time_halted_s"].sum()), 6)
+        if len(vehicles) and vehicles["time_halted_s"].notna().any() else None,
         "throughput_vph": round(float(arrived.sum()) * 3600.0 / sim_s, 3) if sim_s > 0 else None,
     }
     return out
@@ -272,8 +286,11 @@ def run_tables(sim, tripinfo=None) -> tuple[dict, pd.DataFrame, pd.DataFrame]:
             ti = read_tripinfo(tripinfo)
         except ET.ParseError:  # SUMO still writing or died: no time loss then
             ti = None
+    from analysis.halts import HaltCounter
+
+    halts = next((o for o in getattr(sim, "observers", []) if isinstance(o, HaltCounter)), None)
     steps = step_table(sim.step_rows)
-    vehicles = vehicle_table(sim.records.values(), {c: vc.v_max for c, vc in classes.items()}, Ts, ti)
+    vehicles = vehicle_table(sim.records.values(), {c: vc.v_max for c, vc in classes.items()}, Ts, ti, halts)
     figures = summarise(steps, vehicles, Ts)
     figures.update(
         collisions_world=len(sim.collisions_world),

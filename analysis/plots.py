@@ -3,7 +3,8 @@
 * ``trajectories.png``: every vehicle's path with the waypoints it used (the paper's Fig. 3);
 * ``membership.png``: membership index ``l`` of chosen vehicles over time (Fig. 5);
 * ``delay.png``: distribution (empirical CDF) of per-vehicle delay, against another run if given;
-* ``stops.png``: distributions of stop episodes and time stopped per vehicle, likewise.
+* ``stops.png``: distributions of halts (speed <= 0.1 m/s, comparable with SUMO's drivers) and
+  of TM stops (denied requests) per vehicle, and of the time spent so, likewise.
 
 The first two need the run's ``run.mcap`` (``--log summary`` or ``full``); the
 last two its per-vehicle table.  matplotlib's Agg backend is selected inside
@@ -114,14 +115,15 @@ def write_plots(run_dir, vs_dir=None) -> dict:
     ax.set_ylabel("fraction of arrived vehicles")
     _legend(ax)
     save(fig, "delay")
-    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(10, 4))
-    for label, v in runs:
-        arr = v[v["arrival_s"].notna()]
-        _ecdf(ax1, arr["stop_episodes"], label)
-        _ecdf(ax2, arr["time_stopped_s"], label)
-    ax1.set_xlabel("stop episodes per vehicle")
-    ax2.set_xlabel("time stopped per vehicle (s)")
-    for ax in (ax1, ax2):
+    fig, axes = plt.subplots(2, 2, figsize=(10, 7))
+    cols = (("halt_episodes", "halts per vehicle (speed <= 0.1 m/s)"),
+            ("time_halted_s", "time halted per vehicle (s)"),
+            ("stop_episodes", "stops per vehicle (denied TM requests)"),
+            ("time_stopped_s", "time stopped per vehicle (s)"))
+    for ax, (col, xlabel) in zip(axes.ravel(), cols):
+        for label, v in runs:
+            _ecdf(ax, v.loc[v["arrival_s"].notna(), col], label)
+        ax.set_xlabel(xlabel)
         ax.set_ylabel("fraction of arrived vehicles")
         _legend(ax)
     save(fig, "stops")

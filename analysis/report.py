@@ -10,6 +10,12 @@ Two runs are compared only when they ran the same demand: the same vehicle ids
 with the same requested departures.  SUMO's tripinfo lists only finished trips,
 so against a baseline run the check is that every baseline trip is in the other
 run's demand with the same requested departure.
+
+Stops come in two definitions (see :mod:`analysis.kpis`): ``halt_*`` (speed at
+most 0.1 m/s, SUMO's waiting; comparable with a baseline) and ``stop_*``
+(denied TM requests; muvsim only).  Statistics over arrived vehicles favour the
+run that lands fewer vehicles (the slowest have not arrived): read them with
+``vehicles_arrived``.
 """
 
 from __future__ import annotations
@@ -27,7 +33,8 @@ __all__ = ["DemandMismatch", "RunData", "load_run", "check_same_demand", "statis
            "format_report"]
 
 #: Per-vehicle columns summarised by mean, median and 95th percentile.
-DISTRIBUTIONS = ("delay_s", "stop_episodes", "time_stopped_s", "travel_time_s", "admission_delay_s")
+DISTRIBUTIONS = ("delay_s", "halt_episodes", "time_halted_s", "stop_episodes", "time_stopped_s", "travel_time_s",
+                 "admission_delay_s")
 
 #: Departures closer than this are the same (tripinfo has 2 decimals).
 DEPART_TOL_S = 0.051
@@ -171,5 +178,6 @@ def format_report(df: pd.DataFrame, a: RunData, b: RunData | None = None) -> str
     head = f"run: {a.path}  [{a.label}]"
     if b is not None:
         head += f"\nvs:  {b.path}  [{b.label}]"
-    note = "statistics over arrived vehicles; difference = run - vs, ratio = run / vs"
+    note = ("statistics over arrived vehicles; halt = speed <= 0.1 m/s (as SUMO's waiting), stop = denied TM "
+            "request;\ndifference = run - vs, ratio = run / vs")
     return f"{head}\n{note}\n{df.to_string(index=False, float_format=lambda x: f'{x:.3f}')}"

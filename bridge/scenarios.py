@@ -88,6 +88,7 @@ def run_scenario(name: str, out: Path, opts) -> dict:
 
 def run_multi(name: str, out: Path, opts, world=None, specs=None) -> dict:
     """Run a multi-vehicle scenario through :class:`bridge.cosim.Cosim`; write summary and CSVs."""
+    from analysis.halts import HaltCounter
     from analysis.mcap_log import observers_for
     from analysis.outputs import close_observers, write_run_tables
     from bridge.cosim import Cosim, CosimSettings
@@ -120,8 +121,8 @@ def run_multi(name: str, out: Path, opts, world=None, specs=None) -> dict:
         settings = CosimSettings(tm=TMSettings(policy=opts.tm, check=opts.check, seed=opts.seed),
                                  switching=opts.switching, disturbance=opts.disturbance, solver=opts.solver,
                                  seed=opts.seed, duration_s=opts.duration)
-        observers = observers_for(out, getattr(opts, "log", None) or "none",
-                                  {"scenario": name, "seed": opts.seed, **options})
+        observers = [HaltCounter()] + observers_for(out, getattr(opts, "log", None) or "none",
+                                                    {"scenario": name, "seed": opts.seed, **options})
         sim = Cosim(classes, specs, settings, world=world, zones=zones, observers=observers)
         max_steps = int(getattr(opts, "max_steps", 0) or 20000)
         sim.run(max_steps)

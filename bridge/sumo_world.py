@@ -23,6 +23,7 @@ import numpy as np
 from bridge.cosim import Cosim, CosimSettings, VehicleSpec, Zone
 from bridge.pose import front_bumper, sumo_angle
 from analysis.kpis import baseline_vehicle_table, read_tripinfo
+from analysis.halts import HaltCounter
 from analysis.mcap_log import observers_for
 from analysis.outputs import close_observers, write_run_tables
 from bridge.scenarios import _write_summary
@@ -141,8 +142,8 @@ def run_sumo(target: str, out: Path, opts) -> dict:
         world = SumoWorld(adapter, {pv.id: pv for pv in demand.vehicles}, routes)
         settings = CosimSettings(tm=TMSettings(policy=tm, check=check, seed=seed), switching=switching,
                                  disturbance=disturbance, solver=opts.solver, seed=seed, duration_s=duration)
-        observers = observers_for(out, getattr(opts, "log", None) or "none",
-                                  {"scenario": str(target), "seed": seed, **summary["options"]})
+        observers = [HaltCounter()] + observers_for(out, getattr(opts, "log", None) or "none",
+                                                    {"scenario": str(target), "seed": seed, **summary["options"]})
         sim = Cosim(classes, specs, settings, world=world, zones=junction_zones(net), observers=observers)
         bar = None
         if not getattr(opts, "quiet", False):

@@ -145,3 +145,22 @@ def test_summary_json_is_computed_from_the_written_tables(tmp_path):
         else:
             assert summary[key] == value, key
     assert (tmp_path / "steps_1s.csv").exists()
+
+
+def test_halts_are_counted_like_sumo_waiting():
+    """A vehicle standing at an intermediate waypoint halts (speed <= 0.1 m/s); at its last waypoint it
+    does not.  Hand-made group states: step 1 both slow, step 2 'a' moving, step 3 'a' slow again."""
+    from analysis.halts import HaltCounter
+
+    W = np.zeros((5, 2))
+    g = SimpleNamespace(ids=["a", "b"], X=np.zeros((2, 4)), k=np.array([1, 4]), W=[W, W])
+    sim = SimpleNamespace(groups={"paper-a": g})
+    h = HaltCounter()
+    for vx in (0.05, 2.0, 0.1, 0.0):
+        g.X[0, 2] = vx
+        h.on_step(sim, None, None, {})
+    assert h.steps == {"a": 3} and h.episodes == {"a": 2}  # 'b' stands at its last waypoint
+    recs = [VehicleRecord("a", "paper-a", 0.0, 10.0), VehicleRecord("b", "paper-a", 0.0, 10.0)]
+    df = vehicle_table(recs, VMAX, 0.1, halts=h)
+    assert df["halt_episodes"].tolist() == [2, 0] and df["time_halted_s"].tolist() == pytest.approx([0.3, 0.0])
+    assert vehicle_table(recs, VMAX, 0.1)["halt_episodes"].isna().all()

@@ -89,7 +89,9 @@ def test_baseline_run_is_read_from_tripinfo(tmp_path):
     df = report_table(load_run(a), load_run(base)).set_index(["metric", "statistic"])
     assert df.loc[("travel_time_s", "mean"), "vs"] == pytest.approx(12.0)
     assert df.loc[("delay_s", "mean"), "vs"] == pytest.approx(12.0 - 138.9 / 13.89)
-    assert df.loc[("stop_episodes", "mean"), "vs"] == pytest.approx(1.0)
+    assert df.loc[("halt_episodes", "mean"), "vs"] == pytest.approx(1.0)
+    assert df.loc[("time_halted_s", "mean"), "vs"] == pytest.approx(1.0)
+    assert np.isnan(df.loc[("stop_episodes", "mean"), "vs"])  # TM stops: muvsim only
     assert df.loc[("vehicles_arrived", "count"), "difference"] == 1
     moved = trips.replace('departDelay="0.50"', 'departDelay="0.00"', 1)
     (base / "tripinfo.xml").write_text(f"<tripinfos>{moved}</tripinfos>")
