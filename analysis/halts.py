@@ -47,7 +47,7 @@ class HaltCounter:
             if not g.ids:
                 continue
             speed = np.linalg.norm(g.X[:, 2:4], axis=1)
-            last = np.array([k == len(W) - 1 for k, W in zip(g.k, g.W)])
+            last = g.at_last
             for vid in np.asarray(g.ids, dtype=object)[(speed <= self.threshold_mps) & ~last]:
                 now.add(vid)
                 self.steps[vid] = self.steps.get(vid, 0) + 1

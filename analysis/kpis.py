@@ -289,6 +289,8 @@ def run_tables(sim, tripinfo=None) -> tuple[dict, pd.DataFrame, pd.DataFrame]:
     from analysis.halts import HaltCounter
 
     halts = next((o for o in getattr(sim, "observers", []) if isinstance(o, HaltCounter)), None)
+    if hasattr(sim, "flush_records"):  # accumulators of the vehicles still driving
+        sim.flush_records()
     steps = step_table(sim.step_rows)
     vehicles = vehicle_table(sim.records.values(), {c: vc.v_max for c, vc in classes.items()}, Ts, ti, halts)
     figures = summarise(steps, vehicles, Ts)

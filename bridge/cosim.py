@@ -133,7 +133,6 @@ class VehicleRecord:
     closest_m: float = np.inf
     speed_sum: float = 0.0
     steps: int = 0
-    _denied_last: bool = False
 
 
 class _Group:
@@ -149,14 +148,47 @@ class _Group:
         self.l = np.zeros(0, dtype=np.intp)
         self.W: list[np.ndarray] = []
         self.H: list[np.ndarray] = []
+        # every route's waypoints and headings in one buffer, so that the current (or next)
+        # waypoints of all vehicles are one gather: row start[i] + k[i] of vehicle i
+        self._wbuf = np.zeros((1024, 3))
+        self._used = 0
+        self.start = np.zeros(0, dtype=np.intp)
+        self.K = np.zeros(0, dtype=np.intp)
+        # per-vehicle accumulators (flushed into the VehicleRecords by Cosim)
+        self.speed_sum = np.zeros(0)
+        self.steps = np.zeros(0, dtype=np.intp)
+        self.denied_last = np.zeros(0, dtype=bool)
+        self.req_l = np.zeros(0, dtype=np.intp)  # request indices of the last TM state
 
     def add(self, vid, W, H, x0, l0):
+        K = len(W)
+        live = int(self.K.sum())
+        if self._used + K > len(self._wbuf):
+            if self._used > 2 * live + 4096:  # mostly removed routes: compact
+                rows = np.concatenate([np.arange(s, s + k) for s, k in zip(self.start, self.K)]) \
+                    if len(self.K) else np.zeros(0, dtype=np.intp)
+                self._wbuf = np.vstack([self._wbuf[rows], np.zeros((max(1024, 2 * (live + K)), 3))])
+                self.start = np.concatenate([[0], np.cumsum(self.K)[:-1]]).astype(np.intp) \
+                    if len(self.K) else self.start
+                self._used = live
+            if self._used + K > len(self._wbuf):
+                grow = max(len(self._wbuf), K)
+                self._wbuf = np.vstack([self._wbuf, np.zeros((grow, 3))])
+        self._wbuf[self._used:self._used + K, :2] = W
+        self._wbuf[self._used:self._used + K, 2] = H
         self.ids.append(vid)
         self.X = np.vstack([self.X, x0[None]])
         self.k = np.append(self.k, 0)
         self.l = np.append(self.l, l0)
         self.W.append(W)
         self.H.append(H)
+        self.start = np.append(self.start, self._used)
+        self.K = np.append(self.K, K)
+        self._used += K
+        self.speed_sum = np.append(self.speed_sum, 0.0)
+        self.steps = np.append(self.steps, 0)
+        self.denied_last = np.append(self.denied_last, False)
+        self.req_l = np.append(self.req_l, 0)
 
     def remove(self, mask):
         keep = ~mask
@@ -164,15 +196,21 @@ class _Group:
         self.X, self.k, self.l = self.X[keep], self.k[keep], self.l[keep]
         self.W = [w for w, k in zip(self.W, keep) if k]
         self.H = [h for h, k in zip(self.H, keep) if k]
+        self.start, self.K = self.start[keep], self.K[keep]
+        self.speed_sum, self.steps = self.speed_sum[keep], self.steps[keep]
+        self.denied_last, self.req_l = self.denied_last[keep], self.req_l[keep]
+
+    @property
+    def at_last(self) -> np.ndarray:
+        """Whether each vehicle's current waypoint is its route's last."""
+        return self.k == self.K - 1
 
     def centres(self, offset=0):
+        """Waypoints ``k + offset`` (clipped to the last), their headings, and whether they exist."""
         if not self.ids:
             return np.zeros((0, 2)), np.zeros(0), np.zeros(0, dtype=bool)
-        kk = [min(k + offset, len(W) - 1) for k, W in zip(self.k, self.W)]
-        C = np.array([W[k] for W, k in zip(self.W, kk)])
-        Hd = np.array([H[k] for H, k in zip(self.H, kk)])
-        has = np.array([k + offset < len(W) for k, W in zip(self.k, self.W)])
-        return C, Hd, has
+        row = self._wbuf[self.start + np.minimum(self.k + offset, self.K - 1)]
+        return row[:, :2], row[:, 2], self.k + offset < self.K
 
 
 def _headings(W: np.ndarray) -> np.ndarray:
@@ -275,6 +313,7 @@ class Cosim:
             if with_requests:
                 nxt, nh, has = g.centres(1)
                 lp = g.ctl.index(g.X, nxt, nh)
+                g.req_l = lp
                 may = has & (lp <= g.ctl.N)
                 if self.settings.switching == "terminal":
                     may &= g.l == 0
@@ -296,7 +335,12 @@ class Cosim:
 
     def _zone_hits(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
         """(V, Z) bool: claim boxes that meet zone guard boxes."""
-        return np.all((lo[:, None, :] <= self.zone_hi[None]) & (hi[:, None, :] >= self.zone_lo[None]), axis=2)
+        zl, zh = self.zone_lo, self.zone_hi
+        hit = lo[:, 0, None] <= zh[None, :, 0]
+        hit &= hi[:, 0, None] >= zl[None, :, 0]
+        hit &= lo[:, 1, None] <= zh[None, :, 1]
+        hit &= hi[:, 1, None] >= zl[None, :, 1]
+        return hit
 
     def _exit_free(self, vid: str, z: int, pos: dict, cur_lo: np.ndarray, cur_hi: np.ndarray) -> bool:
         """Whether the first waypoint of ``vid``'s route beyond zone ``z``'s guard is free.
@@ -378,27 +422,25 @@ class Cosim:
             self.last_decision = dec
             ms_tm = (time.perf_counter() - tt) * 1e3
             n_req, n_go = int(state.requesting.sum()), int(dec.go.sum())
-            go = dict(zip(state.ids, dec.go))
-            req = dict(zip(state.ids, state.requesting))
+            o = 0  # the fleet state concatenates the non-empty groups in order
             for c, g in self.groups.items():
                 if not g.ids:
                     continue
-                gmask = np.array([go[v] for v in g.ids])
-                rmask = np.array([req[v] for v in g.ids])
-                if gmask.any():
-                    nxt, nh, _ = g.centres(1)
-                    lp = g.ctl.index(g.X[gmask], nxt[gmask], nh[gmask])
+                sl = slice(o, o + len(g.ids))
+                o += len(g.ids)
+                gmask = np.asarray(dec.go[sl], dtype=bool)
+                rmask = np.asarray(state.requesting[sl], dtype=bool)
+                if gmask.any():  # the request index of the new waypoint becomes the index
                     g.k[gmask] += 1
-                    g.l[gmask] = lp
-                for v, r, gg in zip(g.ids, rmask, gmask):
-                    rec = self.records[v]
-                    denied = bool(r and not gg)
-                    if denied:
-                        rec.denials += 1
-                        rec.stopped_steps += 1
-                        if not rec._denied_last:
-                            rec.stop_episodes += 1
-                    rec._denied_last = denied
+                    g.l[gmask] = g.req_l[gmask]
+                denied = rmask & ~gmask
+                for i in np.nonzero(denied)[0]:
+                    rec = self.records[g.ids[i]]
+                    rec.denials += 1
+                    rec.stopped_steps += 1
+                    if not g.denied_last[i]:
+                        rec.stop_episodes += 1
+                g.denied_last = denied
             row["edges"] = int(len(dec.edges))
         # controls and plant
         tc = time.perf_counter()
@@ -416,11 +458,8 @@ class Cosim:
             self.constraint_violations += int(np.sum(np.any((z > m.z_bounds[1] + 1e-7) |
                                                             (z < m.z_bounds[0] - 1e-7), axis=1)))
             g.l = l_new
-            speed = np.linalg.norm(g.X[:, 2:4], axis=1)
-            for v, sp in zip(g.ids, speed):
-                rec = self.records[v]
-                rec.speed_sum += float(sp)
-                rec.steps += 1
+            g.speed_sum += np.linalg.norm(g.X[:, 2:4], axis=1)
+            g.steps += 1
         ms_ctl = (time.perf_counter() - tc) * 1e3
         self.t += 1
         t_next = self.t * s.Ts
@@ -428,11 +467,12 @@ class Cosim:
         for c, g in self.groups.items():
             if not g.ids:
                 continue
-            done = np.array([k == len(W) - 1 for k, W in zip(g.k, g.W)]) & (g.l == 0)
-            for v in [v for v, d in zip(g.ids, done) if d]:
-                self.records[v].arrived_s = t_next
-                self.world.finish(v)
+            done = g.at_last & (g.l == 0)
             if done.any():
+                self._flush(g, done)
+                for i in np.nonzero(done)[0]:
+                    self.records[g.ids[i]].arrived_s = t_next
+                    self.world.finish(g.ids[i])
                 g.remove(done)
         # admissions (condition (12)) against the claims of the vehicles now in the network
         admitted = self._admit(t_next)
@@ -498,6 +538,23 @@ class Cosim:
             n += 1
         return n
 
+    def _flush(self, g: _Group, mask=None) -> None:
+        """Move the group's per-vehicle accumulators (rows ``mask``) into the records."""
+        rows = np.arange(len(g.ids)) if mask is None else np.nonzero(mask)[0]
+        for i in rows:
+            rec = self.records[g.ids[i]]
+            rec.speed_sum += float(g.speed_sum[i])
+            rec.steps += int(g.steps[i])
+            g.speed_sum[i] = 0.0
+            g.steps[i] = 0
+
+    def flush_records(self) -> None:
+        """Bring every :class:`VehicleRecord` up to date (called at the end of :meth:`run`;
+        call it before reading ``records`` after stepping by hand)."""
+        for g in self.groups.values():
+            if g.ids:
+                self._flush(g)
+
     # -------------------------------------------------------------- run
     @property
     def done(self) -> bool:
@@ -510,7 +567,10 @@ class Cosim:
         limit = max_steps
         if self.settings.duration_s is not None:
             limit = min(limit, int(round(self.settings.duration_s / self.settings.Ts)))
-        while self.t < limit and not self.done:
-            self.step()
-            if progress is not None:
-                progress(self)
+        try:
+            while self.t < limit and not self.done:
+                self.step()
+                if progress is not None:
+                    progress(self)
+        finally:
+            self.flush_records()

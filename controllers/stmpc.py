@@ -62,6 +62,26 @@ class _FactorTables:
     ht: list
     HtB: list              # per level: T~^l rows times B
     HtA: list              # per level: T~^l rows times A
+    # level-padded tables (pad rows: 0 x <= +inf), gathered per vehicle by level
+    Hp: np.ndarray         # (d, N+1, F): column j of the rows of T^l
+    hp: np.ndarray         # (N+1, F)
+    gp: np.ndarray         # (N, Ft): T~^l rows times B (one input)
+    HtAp: np.ndarray       # (d, N, Ft): column j of T~^l rows times A
+    htp: np.ndarray        # (N, Ft)
+
+
+def _pad(As: list, bs: list) -> tuple[np.ndarray, np.ndarray]:
+    """Stack per-level rows ``A_l x <= b_l`` into ``(d, L, F)`` columns and ``(L, F)``
+    right-hand sides, padding with ``0 x <= +inf`` (never violated)."""
+    L = len(As)
+    d = As[0].shape[1] if L else 0
+    F = max((a.shape[0] for a in As), default=0)
+    Hp = np.zeros((d, L, F))
+    hp = np.full((L, F), np.inf)
+    for i, (a, b) in enumerate(zip(As, bs)):
+        Hp[:, i, :a.shape[0]] = a.T
+        hp[i, :a.shape[0]] = b
+    return Hp, hp
 
 
 class STMPC:
@@ -85,10 +105,17 @@ class STMPC:
             h = np.concatenate([P.b for P in f.levels])
             counts = [P.n_facets for P in f.levels]
             starts = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.intp)
+            HtB = [P.A @ f.B for P in f.tilde]
+            HtA = [P.A @ f.A for P in f.tilde]
+            Hp, hp = _pad([P.A for P in f.levels], [P.b for P in f.levels])
+            HtAp, htp = _pad(HtA[:self.N], [P.b for P in f.tilde[:self.N]])
+            gp = _pad([g[:, :1] for g in HtB[:self.N]], [P.b for P in f.tilde[:self.N]])[0][0] \
+                if f.B.shape[1] == 1 else np.zeros((0, 0))
             self._tables.append(_FactorTables(
                 states=f.states, inputs=f.inputs, A=f.A, B=f.B, K=f.K, H=H, h=h, starts=starts,
-                Ht=[P.A for P in f.tilde], ht=[P.b for P in f.tilde],
-                HtB=[P.A @ f.B for P in f.tilde], HtA=[P.A @ f.A for P in f.tilde]))
+                Ht=[P.A for P in f.tilde], ht=[P.b for P in f.tilde], HtB=HtB, HtA=HtA,
+                Hp=Hp, hp=hp, gp=gp, HtAp=HtAp, htp=htp))
+        self._steps = max(1, int(np.ceil(np.log2(self.N + 2))))
         self._daqp = None
 
     # ------------------------------------------------------------------ On-1
@@ -117,6 +144,32 @@ class STMPC:
         ndarray of int, shape (V,)
             ``N + 1`` marks a state outside the domain of attraction.
         """
+        E = self.error(X, centres, heading)
+        V = E.shape[0]
+        # The levels are nested (T^l ⊆ T^{l+1}), so membership is monotone in l: a
+        # binary search over [0, N+1] for every vehicle at once (N+1: outside).
+        lo = np.zeros(V, dtype=np.intp)
+        hi = np.full(V, self.N + 1, dtype=np.intp)
+        for _ in range(self._steps):
+            mid = np.minimum((lo + hi) // 2, self.N)
+            inside = self._inside(E, mid)
+            open_ = lo < hi
+            hi = np.where(open_ & inside, mid, hi)
+            lo = np.where(open_ & ~inside, mid + 1, lo)
+        return hi
+
+    def _inside(self, E: np.ndarray, lev: np.ndarray) -> np.ndarray:
+        """Row ``i`` of ``E`` in ``T^{lev[i]}`` (error coordinates), every factor."""
+        ok = np.ones(E.shape[0], dtype=bool)
+        for t in self._tables:
+            viol = -t.hp[lev]
+            for j, s in enumerate(t.states):
+                viol += t.Hp[j][lev] * E[:, s, None]
+            ok &= viol.max(axis=1) <= tol.MEMBERSHIP_TOL
+        return ok
+
+    def index_scan(self, X: np.ndarray, centres: np.ndarray, heading=None) -> np.ndarray:
+        """:meth:`index` by testing every level (no nesting assumed); the reference in tests."""
         E = self.error(X, centres, heading)
         l = np.zeros(E.shape[0], dtype=np.intp)
         for t in self._tables:
@@ -167,30 +220,26 @@ class STMPC:
         return self._to_world(U, heading)
 
     def _solve_exact(self, E, l, rows, ids):
+        """Closed form per single-input factor, every vehicle at once (levels gathered)."""
         U = np.empty((E.shape[0], self.model.m))
         ulo, uhi = self.model.u_bounds
+        lev = l - 1
         for t in self._tables:
             k = int(t.inputs[0])
             Ef = E[:, t.states]
             b = t.B[:, 0]
-            AE = Ef @ t.A.T
-            u_free = -(AE @ b) / (b @ b)
-            lo = np.full(E.shape[0], ulo[k])
-            hi = np.full(E.shape[0], uhi[k])
-            bad = np.zeros(E.shape[0], dtype=bool)
-            for lev in np.unique(l):
-                sel = np.nonzero(l == lev)[0]
-                g = t.HtB[lev - 1][:, 0]
-                beta = t.ht[lev - 1][None, :] - AE[sel] @ t.Ht[lev - 1].T
-                pos, neg = g > tol.FACET_MERGE_TOL, g < -tol.FACET_MERGE_TOL
-                zero = ~(pos | neg)
-                if pos.any():
-                    hi[sel] = np.minimum(hi[sel], (beta[:, pos] / g[pos]).min(axis=1))
-                if neg.any():
-                    lo[sel] = np.maximum(lo[sel], (beta[:, neg] / g[neg]).max(axis=1))
-                if zero.any():
-                    bad[sel] |= (beta[:, zero] < -tol.QP_FEAS_TOL).any(axis=1)
-            bad |= lo > hi + tol.QP_FEAS_TOL
+            u_free = -((Ef @ t.A.T) @ b) / (b @ b)
+            g = t.gp[lev]                                   # (V, Ft)
+            beta = t.htp[lev].copy()                        # h~ - H~ A e
+            for j in range(len(t.states)):
+                beta -= t.HtAp[j][lev] * Ef[:, j, None]
+            pos, neg = g > tol.FACET_MERGE_TOL, g < -tol.FACET_MERGE_TOL
+            zero = ~(pos | neg)
+            safe = np.where(zero, 1.0, g)
+            ratio = beta / safe
+            hi = np.minimum(uhi[k], np.where(pos, ratio, np.inf).min(axis=1))
+            lo = np.maximum(ulo[k], np.where(neg, ratio, -np.inf).max(axis=1))
+            bad = (zero & (beta < -tol.QP_FEAS_TOL)).any(axis=1) | (lo > hi + tol.QP_FEAS_TOL)
             if bad.any():
                 r = rows[np.nonzero(bad)[0]]
                 raise InfeasibleQPError(

@@ -152,8 +152,7 @@ def test_halts_are_counted_like_sumo_waiting():
     does not.  Hand-made group states: step 1 both slow, step 2 'a' moving, step 3 'a' slow again."""
     from analysis.halts import HaltCounter
 
-    W = np.zeros((5, 2))
-    g = SimpleNamespace(ids=["a", "b"], X=np.zeros((2, 4)), k=np.array([1, 4]), W=[W, W])
+    g = SimpleNamespace(ids=["a", "b"], X=np.zeros((2, 4)), at_last=np.array([False, True]))
     sim = SimpleNamespace(groups={"paper-a": g})
     h = HaltCounter()
     for vx in (0.05, 2.0, 0.1, 0.0):

@@ -76,3 +76,21 @@ def test_outside_domain_is_reported_with_vehicle_name(families):
     assert l[0] == 0 and l[1] == fam.N + 1
     with pytest.raises(OutsideDomainError, match="veh-7"):
         ctl.control(X, np.zeros((2, 2)), l, ids=["veh-3", "veh-7"])
+
+
+@settings(max_examples=10, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(seed=st.integers(0, 2**31 - 1), scale=st.sampled_from([1.0, 1.0 + 1e-7, 1.05, 1.5, 40.0]))
+def test_binary_search_index_equals_the_level_scan(family, seed, scale):
+    """The index searches the nested levels by bisection; it must equal testing every level
+    (``index_scan``), also just outside the sets' boundaries (states scaled by ``scale``)
+    and far outside the domain (N + 1).  Exact equality: both apply the same rows and
+    MEMBERSHIP_TOL to the same state."""
+    rng = np.random.default_rng(seed)
+    ctl = STMPC(family)
+    X = np.vstack([family.sample(l, 6, rng) for l in range(family.N + 1)]) * scale
+    C = rng.normal(size=(len(X), 2)) * 30
+    H = rng.uniform(-np.pi, np.pi, size=len(X))
+    if family.model.frame == "road":
+        X = rotate_pairs(X, H)
+    X[:, :2] += C
+    assert np.array_equal(ctl.index(X, C, H), ctl.index_scan(X, C, H))
