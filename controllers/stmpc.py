@@ -68,6 +68,7 @@ class _FactorTables:
     gp: np.ndarray         # (N, Ft): T~^l rows times B (one input)
     HtAp: np.ndarray       # (d, N, Ft): column j of T~^l rows times A
     htp: np.ndarray        # (N, Ft)
+    polar: "_Polar | None" = None  # 2-D factors: sector tables for O(log F) membership
 
 
 def _pad(As: list, bs: list) -> tuple[np.ndarray, np.ndarray]:
@@ -82,6 +83,65 @@ def _pad(As: list, bs: list) -> tuple[np.ndarray, np.ndarray]:
         Hp[:, i, :a.shape[0]] = a.T
         hp[i, :a.shape[0]] = b
     return Hp, hp
+
+
+class _Polar:
+    """Sector tables of nested 2-D polygons that contain the origin in their interiors.
+
+    A point ``p`` lies in such a polygon iff it satisfies the one facet whose angular
+    sector (seen from the origin, between the facet's two vertices) contains ``p``'s
+    angle: that facet's triangle with the origin covers the sector.  So membership is
+    one ``searchsorted`` and one row test instead of all rows.  The rows are the
+    polygon's own H-rows, with the same ``MEMBERSHIP_TOL`` (a point violating its
+    sector's facet by at most the tolerance violates no other facet by more, rows
+    being unit normals up to scale).
+    """
+
+    def __init__(self, keys, a0, a1, b, first, last):
+        self.keys, self.a0, self.a1, self.b = keys, a0, a1, b
+        self.first, self.last = first, last
+
+    @classmethod
+    def build(cls, levels) -> "_Polar | None":
+        """Tables for ``levels`` (Polytopes in 2-D), or None if they do not qualify."""
+        if not levels or levels[0].dim != 2:
+            return None
+        keys, rows, first, last = [], [], [], []
+        n = 0
+        for lev, P in enumerate(levels):
+            if np.any(P.b <= 0):
+                return None  # origin not interior
+            try:
+                V = P.vertices
+            except Exception:  # noqa: BLE001 - any failure: use the general path
+                return None
+            ang = np.arctan2(V[:, 1], V[:, 0])
+            order = np.argsort(ang)
+            V, ang = V[order], ang[order]
+            nxt = np.roll(V, -1, axis=0)
+            mid = 0.5 * (V + nxt)
+            norm = np.linalg.norm(P.A, axis=1)
+            r = np.argmax((mid @ P.A.T - P.b) / norm, axis=1)  # the facet through each edge
+            # each chosen row must be tight at both ends of its edge, else do not use sectors
+            scale = max(1.0, float(np.abs(P.b).max()))
+            for end in (V, nxt):
+                if np.any(np.abs(np.einsum("ij,ij->i", end, P.A[r]) - P.b[r]) > 1e-7 * scale):
+                    return None
+            keys.append(ang + 4.0 * np.pi * lev)
+            rows.append(np.column_stack([P.A[r], P.b[r]]))
+            first.append(n)
+            n += len(V)
+            last.append(n - 1)
+        R = np.vstack(rows)
+        return cls(np.concatenate(keys), R[:, 0].copy(), R[:, 1].copy(), R[:, 2].copy(),
+                   np.array(first, dtype=np.intp), np.array(last, dtype=np.intp))
+
+    def inside(self, x: np.ndarray, y: np.ndarray, lev: np.ndarray) -> np.ndarray:
+        """Whether each point ``(x[i], y[i])`` lies in level ``lev[i]``."""
+        q = np.arctan2(y, x) + 4.0 * np.pi * lev
+        pos = np.searchsorted(self.keys, q, side="right") - 1
+        pos = np.where(pos < self.first[lev], self.last[lev], pos)  # before the first vertex: wrap
+        return self.a0[pos] * x + self.a1[pos] * y - self.b[pos] <= tol.MEMBERSHIP_TOL
 
 
 class STMPC:
@@ -114,7 +174,7 @@ class STMPC:
             self._tables.append(_FactorTables(
                 states=f.states, inputs=f.inputs, A=f.A, B=f.B, K=f.K, H=H, h=h, starts=starts,
                 Ht=[P.A for P in f.tilde], ht=[P.b for P in f.tilde], HtB=HtB, HtA=HtA,
-                Hp=Hp, hp=hp, gp=gp, HtAp=HtAp, htp=htp))
+                Hp=Hp, hp=hp, gp=gp, HtAp=HtAp, htp=htp, polar=_Polar.build(f.levels)))
         self._steps = max(1, int(np.ceil(np.log2(self.N + 2))))
         self._daqp = None
 
@@ -162,6 +222,9 @@ class STMPC:
         """Row ``i`` of ``E`` in ``T^{lev[i]}`` (error coordinates), every factor."""
         ok = np.ones(E.shape[0], dtype=bool)
         for t in self._tables:
+            if t.polar is not None:
+                ok &= t.polar.inside(E[:, t.states[0]], E[:, t.states[1]], lev)
+                continue
             viol = -t.hp[lev]
             for j, s in enumerate(t.states):
                 viol += t.Hp[j][lev] * E[:, s, None]
