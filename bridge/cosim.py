@@ -277,6 +277,7 @@ class Cosim:
                                  rotating=[c for c, vc in self.classes.items() if vc.model.frame == "road"])
         self.monitor = Monitor(settings.tm.check)
         self.pending = sorted(specs, key=lambda s: (s.depart_s, s.id))
+        self._heading0: dict[str, float] = {}
         self.records = {s.id: VehicleRecord(s.id, s.vclass, s.depart_s, s.route_length_m) for s in specs}
         self.rng = np.random.default_rng(settings.seed)
         self.t = 0
@@ -416,9 +417,11 @@ class Cosim:
         tt = time.perf_counter()
         state = self._fleet(with_requests=True)
         n_req = n_go = 0
-        ms_tm = 0.0
+        ms_tm = ms_decide = 0.0
         if state is not None:
+            td = time.perf_counter()
             dec = self.tm.decide(state)
+            ms_decide = (time.perf_counter() - td) * 1e3
             self.last_decision = dec
             ms_tm = (time.perf_counter() - tt) * 1e3
             n_req, n_go = int(state.requesting.sum()), int(dec.go.sum())
@@ -494,21 +497,32 @@ class Cosim:
             self.collisions_world.add(tuple(sorted(pair)))
         row.update(active=0 if cur is None else len(cur.ids), requests=n_req, grants=n_go,
                    denials=n_req - n_go, admitted=admitted, tm_ms=round(ms_tm, 4),
+                   tm_decide_ms=round(ms_decide, 4),
                    controller_ms=round(ms_ctl, 4), world_ms=round((time.perf_counter() - tw) * 1e3, 4))
         self.step_rows.append(row)
         for obs in self.observers:
             obs.on_step(self, state, self.last_decision if state is not None else None, row)
         return row
 
+    def _first_heading(self, sp: VehicleSpec) -> float:
+        h = self._heading0.get(sp.id)
+        if h is None:
+            W = np.asarray(sp.waypoints[:2], dtype=float)
+            h = self._heading0[sp.id] = float(_headings(W)[0])
+        return h
+
     def _admit(self, t_s: float) -> int:
-        ready = [sp for sp in self.pending if sp.depart_s <= t_s + 1e-9]
+        n_ready = 0  # pending is sorted by departure: the ready ones are a prefix
+        while n_ready < len(self.pending) and self.pending[n_ready].depart_s <= t_s + 1e-9:
+            n_ready += 1
+        ready = self.pending[:n_ready]
         if not ready:
             return 0
         cur = self._fleet(with_requests=False)
         cand = FleetState(
             ids=[sp.id for sp in ready], family=np.array([sp.vclass for sp in ready]),
             centre=np.array([sp.waypoints[0] for sp in ready]), index=np.zeros(len(ready), dtype=np.intp),
-            heading=np.array([_headings(np.asarray(sp.waypoints))[0] for sp in ready]),
+            heading=np.array([self._first_heading(sp) for sp in ready]),
             length=np.array([self.classes[sp.vclass].length for sp in ready]),
             width=np.array([self.classes[sp.vclass].width for sp in ready]))
         if cur is None:  # empty network: an empty state
@@ -534,8 +548,10 @@ class Cosim:
             g.add(sp.id, W, H, x0, int(g.ctl.index(x0[None], W[:1], H[:1])[0]))
             self.records[sp.id].admitted_s = t_s
             self.world.insert(sp, g.vclass)
-            self.pending.remove(sp)
             n += 1
+        if n:
+            keep = [i for i, a in enumerate(ok) if not a] + list(range(n_ready, len(self.pending)))
+            self.pending = [self.pending[i] for i in keep]
         return n
 
     def _flush(self, g: _Group, mask=None) -> None:
