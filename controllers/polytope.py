@@ -37,6 +37,25 @@ from controllers import tolerances as tol
 __all__ = ["Polytope", "PolytopeError"]
 
 
+def _origin_interior_2d(A: np.ndarray, b: np.ndarray) -> np.ndarray | None:
+    """The origin as qhull's interior point of a bounded 2-D polygon, when it is one.
+
+    Avoids the Chebyshev LP: the origin is interior when every ``b_i / |a_i|`` exceeds
+    ``EMPTY_RADIUS_TOL``, and the polygon is bounded when its normals leave no angular
+    gap of pi or more.  None when either test fails (the caller then uses the LP).
+    """
+    if len(b) < 3:
+        return None
+    norm = np.linalg.norm(A, axis=1)
+    if np.any(norm <= 0) or np.min(b / norm) <= tol.EMPTY_RADIUS_TOL:
+        return None
+    ang = np.sort(np.arctan2(A[:, 1], A[:, 0]))
+    gaps = np.diff(np.concatenate([ang, ang[:1] + 2 * np.pi]))
+    if gaps.max() >= np.pi - 1e-9:
+        return None
+    return np.zeros(2)
+
+
 class PolytopeError(ValueError):
     """Raised for an invalid polytope operation (empty set, unbounded set...)."""
 
@@ -236,11 +255,13 @@ class Polytope:
             if lo > hi + tol.MEMBERSHIP_TOL:
                 raise PolytopeError("empty interval has no vertices")
             return np.array([[lo], [hi]])
-        centre, radius = self.chebyshev
-        if not np.isfinite(radius):
-            raise PolytopeError("unbounded or empty polytope has no vertex list")
-        if radius <= tol.EMPTY_RADIUS_TOL:
-            raise PolytopeError("empty (or lower-dimensional) polytope")
+        centre = _origin_interior_2d(self.A, self.b) if n == 2 else None
+        if centre is None:
+            centre, radius = self.chebyshev
+            if not np.isfinite(radius):
+                raise PolytopeError("unbounded or empty polytope has no vertex list")
+            if radius <= tol.EMPTY_RADIUS_TOL:
+                raise PolytopeError("empty (or lower-dimensional) polytope")
         hs = np.hstack([self.A, -self.b[:, None]])
         try:
             V = HalfspaceIntersection(hs, centre).intersections

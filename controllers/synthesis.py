@@ -298,17 +298,10 @@ def rotate_pairs(X: np.ndarray, angle) -> np.ndarray:
     return out
 
 
-def _road_condition_margin(model: VehicleModel, factors_T: list, factors_T0: list, states: list,
-                           step_deg: float = 0.5) -> float:
-    """Worst slack of the road-frame switching condition (the analogue of (8)).
-
-    In the frame of waypoint ``k+1`` (x along the segment ``r_k -> r_{k+1}``) a state of
-    ``T^0(r_k)`` is ``R(dθ) e - (d, 0, 0, ...)`` with ``e ∈ T^0``, ``0 < d <= delta`` and
-    ``|dθ| <= turn_max``.  Checked on the corners of T^0's bounding box (a superset), both
-    ends of the offset segment (T^N is convex) and a grid of angles with a margin of
-    ``|corner| * step / 2`` for the angles in between: sound, slightly conservative.
-    Returns min over facets of slack minus margin (>= 0 means the condition holds).
-    """
+def _road_condition_points(model: VehicleModel, factors_T0: list, states: list,
+                           step_deg: float = 0.5) -> tuple[np.ndarray, float]:
+    """Test points and angular margin of :func:`_road_condition_margin` (they depend on
+    ``T^0`` only, so they are computed once per synthesis)."""
     n = model.n
     lo, hi = np.zeros(n), np.zeros(n)
     for st, T0 in zip(states, factors_T0):
@@ -323,6 +316,22 @@ def _road_condition_margin(model: VehicleModel, factors_T: list, factors_T0: lis
     shift[0] = -model.delta
     pts = np.vstack([rot, rot + shift])
     margin = float(np.linalg.norm(corners, axis=1).max()) * h / 2 if turn > 0 else 0.0
+    return pts, margin
+
+
+def _road_condition_margin(model: VehicleModel, factors_T: list, factors_T0: list, states: list,
+                           step_deg: float = 0.5, points=None) -> float:
+    """Worst slack of the road-frame switching condition (the analogue of (8)).
+
+    In the frame of waypoint ``k+1`` (x along the segment ``r_k -> r_{k+1}``) a state of
+    ``T^0(r_k)`` is ``R(dθ) e - (d, 0, 0, ...)`` with ``e ∈ T^0``, ``0 < d <= delta`` and
+    ``|dθ| <= turn_max``.  Checked on the corners of T^0's bounding box (a superset), both
+    ends of the offset segment (T^N is convex) and a grid of angles with a margin of
+    ``|corner| * step / 2`` for the angles in between: sound, slightly conservative.
+    Returns min over facets of slack minus margin (>= 0 means the condition holds).
+    ``points``: :func:`_road_condition_points` of the same arguments, if already computed.
+    """
+    pts, margin = points if points is not None else _road_condition_points(model, factors_T0, states, step_deg)
     worst = np.inf
     for st, T in zip(states, factors_T):
         slack = T.b[None, :] - pts[:, st] @ T.A.T
@@ -401,6 +410,8 @@ def synthesize(model: VehicleModel, settings: SynthesisSettings | None = None) -
     levels = [[p[8]] for p in prepared]
     tildes = [[p[8] - p[7]] for p in prepared]
     N = None
+    road_pts = _road_condition_points(model, [lv[0] for lv in levels], [p[0] for p in prepared]) \
+        if model.frame == "road" else None
     for l in range(1, settings.max_levels + 1):
         ok = True
         for k, (states, inputs, A, B, K, X, U, D, T0, info) in enumerate(prepared):
@@ -412,7 +423,7 @@ def synthesize(model: VehicleModel, settings: SynthesisSettings | None = None) -
                 ok = False
         if model.frame == "road":
             ok = _road_condition_margin(model, [lv[-1] for lv in levels], [lv[0] for lv in levels],
-                                        [p[0] for p in prepared]) >= -tol.VERIFY_TOL
+                                        [p[0] for p in prepared], points=road_pts) >= -tol.VERIFY_TOL
         if ok:
             N = l
             break
