@@ -7,6 +7,8 @@
     Run a scenario and write ``DIR/summary.json`` plus per-step CSV.
 ``muvsim report RUN_DIR [--vs OTHER_RUN_DIR] [--plots]``
     KPI statistics of a run (or two, compared) into ``RUN_DIR/report.csv``.
+``muvsim sweep SCENARIO --out DIR --seeds S [S ...] [--tm ...] ...``
+    Runs over seeds x options in parallel (Dask), one KPI table ``DIR/sweep.csv``.
 """
 
 from __future__ import annotations
@@ -119,6 +121,28 @@ def _cmd_report(args) -> int:
     return 0
 
 
+def _cmd_sweep(args) -> int:
+    from bridge.sweep import SweepSettings, SweepSettingsError, format_table, sweep
+
+    try:
+        settings = SweepSettings(
+            scenario=args.scenario, seeds=tuple(args.seeds), out=Path(args.out), tm=tuple(args.tm or ()),
+            check=tuple(args.check or ()), switching=tuple(args.switching or ()),
+            disturbance=tuple(args.disturbance or ()), solver=tuple(args.solver or ()), duration_s=args.duration,
+            baseline=args.baseline, log=args.log, workers=args.workers, scheduler=args.scheduler,
+            vclass=args.vclass, vehicles=args.vehicles)
+        df = sweep(settings, quiet=args.quiet)
+    except SweepSettingsError as exc:
+        print(f"muvsim sweep: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:  # e.g. no scheduler at the address given
+        print(f"muvsim sweep: cannot run on Dask: {exc}", file=sys.stderr)
+        return 2
+    print(format_table(df))
+    print(f"written: {settings.out / 'sweep.csv'}")
+    return 0 if bool(df["complete"].all()) else 1
+
+
 def _write_plots(run: Path, vs: Path | None = None) -> None:
     from analysis.plots import write_plots
 
@@ -168,6 +192,31 @@ def build_parser() -> argparse.ArgumentParser:
                    help="compare with this run (same demand): difference and ratio")
     q.add_argument("--plots", action="store_true", help="also write plots into RUN_DIR/plots")
     q.set_defaults(func=_cmd_report)
+    w = sub.add_parser("sweep", help="run a scenario over seeds and options in parallel (Dask): one KPI table")
+    w.add_argument("scenario", help="grid, grid-large, a scenario .toml, a .sumocfg, or a free-plane scenario: "
+                                    "single, paper10, swap, crossing")
+    w.add_argument("--out", default="runs/sweep",
+                   help="output directory: DIR/<run label>/ per run and DIR/sweep.csv (default runs/sweep)")
+    w.add_argument("--seeds", type=int, nargs="+", required=True, metavar="SEED", help="seeds to run")
+    w.add_argument("--tm", choices=["greedy", "optimal"], nargs="+", default=None,
+                   help="policies to sweep (default: the scenario's)")
+    w.add_argument("--check", choices=["union", "timed"], nargs="+", default=None)
+    w.add_argument("--switching", choices=["terminal", "early"], nargs="+", default=None)
+    w.add_argument("--disturbance", choices=["random", "adversarial", "none"], nargs="+", default=None)
+    w.add_argument("--solver", choices=["exact", "daqp", "proxsuite"], nargs="+", default=None,
+                   help="default exact")
+    w.add_argument("--duration", type=float, default=None, help="simulated seconds (default: the scenario's)")
+    w.add_argument("--baseline", action="store_true", help="add one --baseline sumo run per seed")
+    w.add_argument("--log", choices=["none", "summary", "full"], default="none",
+                   help="run.mcap of each run (default none)")
+    w.add_argument("--workers", type=int, default=None,
+                   help="worker processes of the local cluster (default: CPUs, at most one per run)")
+    w.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="use an existing Dask cluster, e.g. tcp://host:8786 (DIR must be shared with its workers)")
+    w.add_argument("--vclass", default="paper-a", help="vehicle class for single/swap/crossing")
+    w.add_argument("--vehicles", type=int, default=8, help="vehicles in swap/crossing")
+    w.add_argument("--quiet", action="store_true", help="no progress line per finished run")
+    w.set_defaults(func=_cmd_sweep)
     return p
 
 

@@ -1,0 +1,180 @@
+"""muvsim sweep: runs over seeds x options as Dask tasks in worker processes, one KPI table."""
+
+import json
+from pathlib import Path
+from types import SimpleNamespace
+
+import pandas as pd
+import pytest
+
+from bridge.cli import main
+from bridge.sumo_world import run_sumo
+from bridge.sweep import ROW_COLUMNS, RunSpec, SweepSettings, SweepSettingsError, plan, run_plan, sweep
+from sumo_nets.generate import write_sumocfg
+
+SMALL = """\
+name = "small"
+seed = 1
+duration_s = 300.0
+tm = "optimal"
+check = "union"
+switching = "early"
+disturbance = "random"
+
+[net]
+type = "grid"
+junctions = 3
+spacing_m = 100.0
+lanes = 2
+
+[demand]
+vehicles = 10
+duration_s = 20.0
+class_mix = { car = 0.6, bus = 0.2, truck = 0.2 }
+"""
+
+#: Figures that do not depend on the machine (not wall time, not rtf).
+DETERMINISTIC = ["vehicles_total", "vehicles_arrived", "collisions_sumo", "collisions_geometric",
+                 "invariant_violations", "min_separation_m", "mean_travel_time_s", "mean_delay_s", "stop_commands",
+                 "halt_episodes", "time_halted_s", "simulated_s"]
+
+
+@pytest.fixture(scope="module")
+def small_toml(tmp_path_factory):
+    """A 3 x 3 junction grid with 10 vehicles (mixed classes), as a scenario file."""
+    p = tmp_path_factory.mktemp("sweep-scenario") / "small.toml"
+    p.write_text(SMALL)
+    return p
+
+
+def _direct(scenario, out, seed, **kw):
+    opts = dict(seed=seed, duration=20.0, tm=None, check=None, switching=None, disturbance=None, solver="exact",
+                baseline=None, gui=False, quiet=True, log="none")
+    opts.update(kw)
+    return run_sumo(str(scenario), out, SimpleNamespace(**opts))
+
+
+def _value(v):
+    return None if v is None or (isinstance(v, float) and v != v) or v is pd.NA else float(v)
+
+
+def test_sweep_on_local_cluster_equals_direct_runs(small_toml, tmp_path):
+    """Two seeds through the local Dask cluster give the figures and per-vehicle tables of two runs done
+    directly by run_sumo in this process, each row from the run of its own seed."""
+    settings = SweepSettings(scenario=str(small_toml), seeds=(1, 2), out=tmp_path / "sweep", duration_s=20.0,
+                             workers=2)
+    df = sweep(settings)
+    assert list(df.columns[:len(ROW_COLUMNS)]) == list(ROW_COLUMNS)
+    assert list(df["label"]) == ["seed1", "seed2"] and list(df["seed"]) == [1, 2]
+    assert df["complete"].all(), df["error"].tolist()
+    assert df["worker"].notna().all()  # ran on Dask workers, not here
+    # options not swept are the scenario's, written into every row
+    assert set(df["tm"]) == {"optimal"} and set(df["switching"]) == {"early"} and set(df["check"]) == {"union"}
+    direct = {s: _direct(small_toml, tmp_path / f"direct{s}", s) for s in (1, 2)}
+    # the two seeds differ, so a sweep that ignored (or swapped) seeds would fail below
+    assert any(_value(direct[1].get(k)) != _value(direct[2].get(k)) for k in DETERMINISTIC)
+    for _, row in df.iterrows():
+        d = direct[row["seed"]]
+        assert {k: _value(row[k]) for k in DETERMINISTIC} == {k: _value(d.get(k)) for k in DETERMINISTIC}
+        a = pd.read_csv(Path(row["run_dir"]) / "vehicles.csv")
+        b = pd.read_csv(tmp_path / f"direct{row['seed']}" / "vehicles.csv")
+        pd.testing.assert_frame_equal(a, b)
+    written = pd.read_csv(tmp_path / "sweep" / "sweep.csv")
+    assert list(written["label"]) == ["seed1", "seed2"]
+    assert written["stop_commands"].tolist() == df["stop_commands"].tolist()
+
+
+def test_failed_runs_are_rows_and_the_others_complete(small_toml, tmp_path):
+    """A run whose SUMO net is missing and a run that raises before starting are rows with complete False
+    and their error; the muvsim and baseline runs of the same sweep complete."""
+    good = plan(SweepSettings(scenario=str(small_toml), seeds=(3,), out=tmp_path, tm=("greedy",),
+                              duration_s=20.0, baseline=True))
+    routes = tmp_path / "some.rou.xml"
+    routes.write_text("<routes/>")
+    broken = write_sumocfg(tmp_path / "broken.sumocfg", tmp_path / "missing.net.xml", [routes])
+    runs = good + (RunSpec(label="broken", scenario=str(broken), seed=3, tm="optimal", check="union",
+                           switching="early", disturbance="random", duration_s=20.0),
+                   RunSpec(label="bad-class", scenario="single", seed=0, vclass="no-such-class", duration_s=5.0))
+    df = run_plan(runs, tmp_path / "out", workers=2).set_index("label")
+    assert list(df.index) == ["seed3", "seed3_baseline-sumo", "broken", "bad-class"]
+    assert df.loc["seed3", "complete"] and df.loc["seed3", "tm"] == "greedy"
+    assert df.loc["seed3_baseline-sumo", "complete"] and df.loc["seed3_baseline-sumo", "driver"] == "sumo"
+    assert df.loc["seed3_baseline-sumo", "collisions_sumo"] == 0
+    assert not df.loc["broken", "complete"] and "missing.net.xml" in df.loc["broken", "error"]
+    assert not df.loc["bad-class", "complete"] and "no-such-class" in df.loc["bad-class", "error"]
+    # the failed SUMO run still left its summary saying why
+    s = json.loads((tmp_path / "out" / "broken" / "summary.json").read_text())
+    assert s["complete"] is False and "missing.net.xml" in s["error"]
+    assert len(pd.read_csv(tmp_path / "out" / "sweep.csv")) == 4
+
+
+def test_cli_sweep_free_plane_over_seeds_and_options(tmp_path, capsys):
+    """`muvsim sweep single` runs seeds x solvers (no SUMO), prints the table and writes sweep.csv."""
+    out = tmp_path / "sw"
+    rc = main(["sweep", "single", "--out", str(out), "--seeds", "0", "1", "--solver", "exact", "daqp",
+               "--duration", "5", "--workers", "2", "--quiet"])
+    printed = capsys.readouterr().out
+    assert rc == 0, printed
+    df = pd.read_csv(out / "sweep.csv")
+    assert sorted(df["label"]) == ["seed0_solver-daqp", "seed0_solver-exact", "seed1_solver-daqp",
+                                   "seed1_solver-exact"]
+    assert df["complete"].all() and (df["vehicles_total"] == 1).all()
+    assert set(df["tm"]) == {"optimal"} and set(df["switching"]) == {"early"}  # muvsim run's defaults
+    assert "seed1_solver-daqp" in printed and "written:" in printed
+    for label in df["label"]:
+        assert json.loads((out / label / "summary.json").read_text())["complete"]
+
+
+def test_cli_sweep_bad_settings_exit_2_naming_the_field(tmp_path, capsys):
+    assert main(["sweep", "paper10", "--out", str(tmp_path), "--seeds", "1", "--baseline"]) == 2
+    assert "baseline" in capsys.readouterr().err
+    assert main(["sweep", "grid", "--out", str(tmp_path), "--seeds", "1", "1"]) == 2
+    assert "seeds" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("change, field", [
+    (dict(seeds=()), "seeds"),
+    (dict(seeds=(1, 1)), "seeds"),
+    (dict(seeds=(-1,)), r"seeds\[0\]"),
+    (dict(seeds=(1.5,)), r"seeds\[0\]"),
+    (dict(seeds=5), "seeds"),
+    (dict(tm=("fastest",)), "tm"),
+    (dict(check="union"), "check"),
+    (dict(switching=("early", "early")), "switching"),
+    (dict(disturbance=("gusty",)), "disturbance"),
+    (dict(solver=("gurobi",)), "solver"),
+    (dict(duration_s=0.0), "duration_s"),
+    (dict(duration_s=float("nan")), "duration_s"),
+    (dict(log="verbose"), "log"),
+    (dict(workers=0), "workers"),
+    (dict(workers=2, scheduler="tcp://10.0.0.5:8786"), "workers"),
+    (dict(scheduler="http://10.0.0.5:8786"), "scheduler"),
+    (dict(scheduler="localhost"), "scheduler"),
+    (dict(scheduler="tcp://host:99999"), "scheduler"),
+    (dict(scenario="no-such-scenario"), "scenario"),
+    (dict(scenario="/nonexistent/city.toml"), "scenario"),
+    (dict(scenario=""), "scenario"),
+    (dict(scenario="swap", baseline=True), "baseline"),
+    (dict(baseline="yes"), "baseline"),
+    (dict(vehicles=0), "vehicles"),
+])
+def test_settings_are_validated_with_the_field_named(change, field, tmp_path):
+    kw = dict(scenario="grid", seeds=(1, 2), out=tmp_path)
+    kw.update(change)
+    with pytest.raises(SweepSettingsError, match=rf"^{field}: "):
+        SweepSettings(**kw)
+
+
+def test_settings_accept_lists_and_plan_labels_the_varied_options(tmp_path):
+    s = SweepSettings(scenario="grid", seeds=[4, 2], out=tmp_path / "x", tm=["greedy", "optimal"],
+                      check=["timed"], baseline=True, scheduler=" tcp://10.0.0.5:8786 ")
+    assert s.seeds == (4, 2) and s.tm == ("greedy", "optimal") and s.scheduler == "tcp://10.0.0.5:8786"
+    runs = plan(s)
+    assert [r.label for r in runs] == ["seed4_tm-greedy", "seed4_tm-optimal", "seed4_baseline-sumo",
+                                       "seed2_tm-greedy", "seed2_tm-optimal", "seed2_baseline-sumo"]
+    assert {r.check for r in runs if r.driver == "muvsim"} == {"timed"}
+    assert {r.switching for r in runs if r.driver == "muvsim"} == {"early"}  # grid.toml's
+    with pytest.raises(SweepSettingsError, match="^label: "):
+        RunSpec(label="seed1:sumo", scenario="grid", seed=1)  # SUMO reads host:port in such a path
+    with pytest.raises(SweepSettingsError, match="labels must be distinct"):
+        run_plan([RunSpec(label="a", scenario="single", seed=0)] * 2, tmp_path)
