@@ -28,9 +28,15 @@ from analysis.mcap_log import observers_for
 from analysis.outputs import close_observers, write_run_tables
 from bridge.scenarios import _write_summary
 from bridge.sumo_adapter import SumoAdapter, SumoError
-from bridge.waypoints import RouteError, load_net
+from bridge.waypoints import RouteError, load_net, trim_start
 from controllers.classes import builtin_classes
 from tm.settings import TMSettings
+
+#: Gap between a departing vehicle's back and the start of its first lane (m).
+DEPART_CLEARANCE_M = 0.5
+
+#: Options of a user's ``.sumocfg`` run when the command line leaves them out.
+SUMOCFG_DEFAULTS = {"tm": "optimal", "check": "union", "switching": "early", "disturbance": "random"}
 
 __all__ = ["SumoWorld", "junction_zones", "run_sumo"]
 
@@ -48,8 +54,9 @@ class SumoWorld:
     def insert(self, spec: VehicleSpec, vclass) -> None:
         pv, r = self.planned[spec.id], self.routes[spec.id]
         self.lengths[spec.id] = pv.length
-        h0 = float(np.arctan2(*(r.waypoints[1] - r.waypoints[0])[::-1]))
-        self.adapter.admit(pv, front_bumper(r.waypoints[0], h0, pv.length), sumo_angle(h0),
+        W = np.asarray(spec.waypoints, dtype=float)
+        h0 = float(np.arctan2(*(W[1] - W[0])[::-1]))
+        self.adapter.admit(pv, front_bumper(W[0], h0, pv.length), sumo_angle(h0),
                            depart_lane=r.depart_lane_index)
 
     def push(self, ids, centre, heading) -> None:
@@ -112,7 +119,8 @@ def run_sumo(target: str, out: Path, opts) -> dict:
             cfg = read_sumocfg(target)
             sumocfg, net = cfg.path, cfg.net
             seed, duration = opts.seed, opts.duration or 300.0
-            tm, check, switching, disturbance = opts.tm, opts.check, opts.switching, opts.disturbance
+            tm, check, switching, disturbance = (getattr(opts, k) or SUMOCFG_DEFAULTS[k]
+                                                 for k in ("tm", "check", "switching", "disturbance"))
         else:
             scenario = load_scenario(target)
             files = materialise(scenario, out / "inputs")
@@ -138,7 +146,10 @@ def run_sumo(target: str, out: Path, opts) -> dict:
             c = cls_of[pv.id]
             r = geo.route(pv.edges, classes[c].model.delta, vclass=pv.vclass, vehicle_id=pv.id)
             routes[pv.id] = r
-            specs.append(VehicleSpec(id=pv.id, vclass=c, waypoints=r.waypoints, depart_s=pv.depart_s))
+            # depart with the whole body on the first lane (SUMO's departPos="base"), not
+            # with its back half in the junction behind it
+            W = trim_start(r, 0.5 * classes[c].length + DEPART_CLEARANCE_M)
+            specs.append(VehicleSpec(id=pv.id, vclass=c, waypoints=W, depart_s=pv.depart_s))
         world = SumoWorld(adapter, {pv.id: pv for pv in demand.vehicles}, routes)
         settings = CosimSettings(tm=TMSettings(policy=tm, check=check, seed=seed), switching=switching,
                                  disturbance=disturbance, solver=opts.solver, seed=seed, duration_s=duration)

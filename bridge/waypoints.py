@@ -434,6 +434,21 @@ def load_net(net_path: str | os.PathLike) -> NetGeometry:
     return _load_net_cached(str(p), st.st_mtime_ns, st.st_size)
 
 
+def trim_start(route: "RouteWaypoints", s0: float) -> np.ndarray:
+    """The route's waypoints from arc length ``s0`` on: the point at ``s0`` on the
+    polyline, then every waypoint beyond it (consecutive gaps stay at most ``delta``:
+    the new first gap is part of an old one).
+
+    Used for departures: SUMO inserts a vehicle with its back at the start of its
+    first lane (``departPos="base"``), so muvsim starts its centre half a length in.
+    ``s0`` is clamped to half the route.
+    """
+    s0 = float(min(max(s0, 0.0), 0.5 * route.length_m))
+    keep = route.arc_length > s0 + 1e-6
+    start = _at(route.polyline, _arc(route.polyline), s0)
+    return np.vstack([start[None], route.waypoints[keep]])
+
+
 def route_waypoints(net: str | os.PathLike | NetGeometry, edges: Sequence[str], delta: float, *,
                     depart_lane: int | None = None, vclass: str | None = None, vehicle_id: str | None = None,
                     corner_deg: float = 30.0) -> RouteWaypoints:

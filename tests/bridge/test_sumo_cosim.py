@@ -91,3 +91,36 @@ def test_small_grid_every_vehicle_arrives(grid_net, tmp_path):
     assert s["vehicles_total"] == 10 and s["vehicles_arrived"] == 10 and s["finished"]
     trips = (tmp_path / "out" / "tripinfo.xml").read_text()
     assert trips.count("<tripinfo ") == 10
+
+
+def test_user_sumocfg_runs_with_default_options(grid_net, grid_routes, tmp_path):
+    """A .sumocfg carries no muvsim options: the command line's absent ones take the defaults."""
+    from bridge.sumo_world import SUMOCFG_DEFAULTS
+
+    cfg = write_sumocfg(tmp_path / "mine.sumocfg", grid_net, [grid_routes])
+    s = run_sumo(str(cfg), tmp_path / "out", _opts(duration=5.0))
+    assert s["complete"], s.get("error")
+    assert {k: s["options"][k] for k in SUMOCFG_DEFAULTS} == SUMOCFG_DEFAULTS
+
+
+def test_departures_put_the_whole_body_on_the_first_lane(grid_net):
+    """SUMO inserts with the back at the start of the first lane (departPos="base"); muvsim's first
+    waypoint (the body's centre) is half a length plus DEPART_CLEARANCE_M in, so no body sticks
+    back into the junction behind (found as a SUMO junction collision on grid-large), and the
+    trimmed waypoints are still at most delta apart and on the route."""
+    import numpy as np
+
+    from bridge.sumo_world import DEPART_CLEARANCE_M
+    from bridge.waypoints import load_net, trim_start
+
+    geo = load_net(grid_net)
+    net = __import__("sumolib").net.readNet(str(grid_net))
+    e = next(ed for ed in net.getEdges() if ed.getOutgoing() and ed.getLength() > 30)
+    nxt = next(iter(e.getOutgoing()))
+    r = geo.route([e.getID(), nxt.getID()], 3.0)
+    for length in (5.0, 12.0):
+        W = trim_start(r, 0.5 * length + DEPART_CLEARANCE_M)
+        arc0 = float(np.hypot(*(W[0] - r.polyline[0])))  # first edge is straight here
+        assert arc0 == pytest.approx(0.5 * length + DEPART_CLEARANCE_M, abs=1e-9)
+        assert np.all(np.linalg.norm(np.diff(W, axis=0), axis=1) <= 3.0 + 1e-9)
+        assert np.allclose(W[-1], r.waypoints[-1]) and len(W) < len(r.waypoints)
