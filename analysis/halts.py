@@ -12,6 +12,8 @@ there) is not a halt: SUMO's vehicles do not stop at the end of their route.
 
 from __future__ import annotations
 
+from collections import Counter
+
 import numpy as np
 
 __all__ = ["HaltCounter", "SUMO_HALT_MPS"]
@@ -36,21 +38,18 @@ class HaltCounter:
 
     def __init__(self, threshold_mps: float = SUMO_HALT_MPS):
         self.threshold_mps = float(threshold_mps)
-        self.steps: dict[str, int] = {}
-        self.episodes: dict[str, int] = {}
+        self.steps: Counter[str] = Counter()
+        self.episodes: Counter[str] = Counter()
         self._halted: set[str] = set()
 
     def on_step(self, sim, state, decision, row) -> None:
         """Update the counts from the vehicles' states after the step."""
-        now = set()
+        now: set[str] = set()
         for g in sim.groups.values():
             if not g.ids:
                 continue
-            speed = np.linalg.norm(g.X[:, 2:4], axis=1)
-            last = g.at_last
-            for vid in np.asarray(g.ids, dtype=object)[(speed <= self.threshold_mps) & ~last]:
-                now.add(vid)
-                self.steps[vid] = self.steps.get(vid, 0) + 1
-                if vid not in self._halted:
-                    self.episodes[vid] = self.episodes.get(vid, 0) + 1
+            halted = (np.hypot(g.X[:, 2], g.X[:, 3]) <= self.threshold_mps) & ~g.at_last
+            now.update(g.ids[i] for i in np.flatnonzero(halted))
+        self.steps.update(now)                   # counted in C
+        self.episodes.update(now - self._halted)
         self._halted = now

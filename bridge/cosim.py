@@ -295,6 +295,7 @@ class Cosim:
         self.zone_hi = np.array([z.hi for z in self.zones], dtype=float).reshape(-1, 2) + radius
         self.zone_holder: list[str | None] = [None] * len(self.zones)
         self.zone_wait: dict[tuple[int, str], int] = {}
+        self._where: dict = {}  # vehicle id -> (group, row), refreshed by _gate
 
     # -------------------------------------------------------------- state
     def _fleet(self, with_requests: bool):
@@ -350,22 +351,21 @@ class Cosim:
         (its class's largest ``P^0`` extent plus its footprint's half diagonal); free means no
         other vehicle's current claim box meets it.
         """
-        for g in self.groups.values():
-            if vid in g.ids:
-                break
-        j = g.ids.index(vid)
+        g, j = self._where[vid]
         W, k = g.W[j], int(g.k[j])
         r0 = float(np.abs(self.families[g.vclass.name].position_sets[0]).max()) \
             + 0.5 * float(np.hypot(g.vclass.length, g.vclass.width))
         lo_z, hi_z = self.zone_lo[z], self.zone_hi[z]
-        inside = np.all((W - r0 <= hi_z) & (W + r0 >= lo_z), axis=1)
-        if not inside[k + 1:].any():
+        Wk = W[k + 1:]
+        inside = (Wk[:, 0] - r0 <= hi_z[0]) & (Wk[:, 0] + r0 >= lo_z[0]) & \
+            (Wk[:, 1] - r0 <= hi_z[1]) & (Wk[:, 1] + r0 >= lo_z[1])
+        if not inside.any():
             return True  # the route does not cross the guard beyond here
-        first_in = k + 1 + int(np.argmax(inside[k + 1:]))
+        first_in = int(np.argmax(inside))
         out = np.nonzero(~inside[first_in:])[0]
         if len(out) == 0:
             return True  # the route ends inside the guard: it arrives there
-        e = first_in + int(out[0])
+        e = k + 1 + first_in + int(out[0])
         lo, hi = W[e] - r0, W[e] + r0
         hit = np.all((cur_lo <= hi) & (cur_hi >= lo), axis=1)
         hit[pos[vid]] = False
@@ -387,7 +387,8 @@ class Cosim:
                          heading=state.req_heading, length=state.length, width=state.width)
         new_lo, new_hi = self.tm.claims(new).aabb()
         want = self._zone_hits(new_lo, new_hi) & ~cur_hits & req[:, None]
-        for z in range(len(self.zones)):
+        self._where = {v: (g, j) for g in self.groups.values() for j, v in enumerate(g.ids)}
+        for z in map(int, np.nonzero(want.any(axis=0))[0]):
             cand = [state.ids[i] for i in np.nonzero(want[:, z])[0]]
             for v in cand:
                 self.zone_wait.setdefault((z, v), self.t)
