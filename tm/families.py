@@ -15,7 +15,7 @@ manager needs, per family and level ``l``:
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -43,6 +43,16 @@ def _contains(P: np.ndarray, Q: np.ndarray) -> bool:
     """Whether convex polygon ``P`` contains every vertex of ``Q`` (within CONTAINMENT_TOL)."""
     A, b = halfspaces(P)
     return bool(np.all(Q @ A.T <= b + CONTAINMENT_TOL))
+
+
+def _is_box(P: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """Rows of the padded stack ``P (T, K, 2)`` that are their bounding box ``[lo, hi]``:
+    every vertex at a corner (within GEOMETRY_TOL) and all four corners present."""
+    on = [(np.abs(P[..., d] - lo[:, None, d]) <= GEOMETRY_TOL, np.abs(P[..., d] - hi[:, None, d]) <= GEOMETRY_TOL)
+          for d in (0, 1)]
+    at_corner = (on[0][0] | on[0][1]) & (on[1][0] | on[1][1])
+    corners = [(on[0][a] & on[1][b]).any(axis=1) for a in (0, 1) for b in (0, 1)]
+    return at_corner.all(axis=1) & np.logical_and.reduce(corners)
 
 
 @dataclass(frozen=True, eq=False)
@@ -79,11 +89,23 @@ class FamilyTable:
     hi: np.ndarray
     nested: np.ndarray
     rotate: np.ndarray | None = None
+    #: Per row: the hull ``H^l`` (``hull_box``) or level ``P^l`` (``level_box``) is an
+    #: axis-aligned rectangle of its family frame (a claim of a rotating family is then
+    #: an oriented box: the narrow phase's fast path); ``level_lo, level_hi`` bound ``P^l``.
+    hull_box: np.ndarray = field(init=False)
+    level_box: np.ndarray = field(init=False)
+    level_lo: np.ndarray = field(init=False)
+    level_hi: np.ndarray = field(init=False)
 
     def __post_init__(self) -> None:
         if self.rotate is None:
             object.__setattr__(self, "rotate", np.zeros(len(self.keys), dtype=bool))
-        for name in ("offset", "n_levels", "levels", "hulls", "lo", "hi", "nested", "rotate"):
+        object.__setattr__(self, "hull_box", _is_box(self.hulls, self.lo, self.hi))
+        object.__setattr__(self, "level_lo", self.levels.min(axis=1))
+        object.__setattr__(self, "level_hi", self.levels.max(axis=1))
+        object.__setattr__(self, "level_box", _is_box(self.levels, self.level_lo, self.level_hi))
+        for name in ("offset", "n_levels", "levels", "hulls", "lo", "hi", "nested", "rotate", "hull_box",
+                     "level_box", "level_lo", "level_hi"):
             getattr(self, name).flags.writeable = False
 
     def family_index(self, family) -> np.ndarray:
