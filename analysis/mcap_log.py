@@ -22,13 +22,21 @@ topic                     schema                   content                      
 ========================  =======================  ==========================================  =========
 
 The observer's own time per step (encoding and writing) goes into the step
-row as ``logging_ms``.
+row as ``logging_ms``.  Messages are assembled from text templates, column by
+column (see "encoding" below), and are byte for byte what ``json.dumps`` of the
+message dicts gives: every float at full round-trip precision.  Measured
+(``benchmarks/bench_logging.py``, README "MCAP logs"): 11-13 us CPU per
+vehicle-step at ``summary``, of which ~4 us are the MCAP writer and its zstd
+chunks and ~2.5 us the text of x, y, vx, vy; ``full`` about doubles it (claim
+polygons, 8 points each).
 """
 
 from __future__ import annotations
 
 import json
+import math
 import time
+from itertools import chain, compress
 from pathlib import Path
 
 import numpy as np
@@ -104,17 +112,127 @@ _RED = {"r": 0.9, "g": 0.1, "b": 0.1, "a": 0.9}
 _BLUE = {"r": 0.2, "g": 0.4, "b": 0.9, "a": 0.9}
 _ORANGE = {"r": 1.0, "g": 0.6, "b": 0.0, "a": 1.0}
 
+# ---------------------------------------------------------------------------- encoding
+# Messages are JSON text assembled from templates; it is, byte for byte, what
+# ``json.dumps(msg, separators=(",", ":"))`` of the message as dicts gives (the encoder
+# this replaced; ``tests/analysis/test_mcap_encoding.py`` compares the two).  Per step
+# and class a message part is one ``%`` of a template repeated once per vehicle, filled
+# from columns: ids and class names as ``json.dumps`` writes them, floats as their
+# shortest round-trip text (``float.__repr__``, which is what ``json.dumps`` writes;
+# ``NaN``/``Infinity`` as ``json.dumps`` writes them), so a reader decodes every value
+# exactly.  Float text is the expensive part (0.6-1 us a value), so what repeats
+# from step to step -- the text derived from a vehicle's current waypoint, and a claim
+# polygon's points -- is kept in a cache keyed by the bytes of the values it was made
+# from (exact: -0.0 and 0.0 differ there, as their texts do).
+
+_SEP = (",", ":")
+_REPR = float.__repr__
+_SLOT, _QSLOT, _STAMP = "\x00", "\x01", "\x02"  # template markers: %s, "%s", the step's stamp
+
+
+_ENCODER = json.JSONEncoder(separators=_SEP)  # json.dumps(obj, separators=_SEP), without a new encoder a call
+
+
+def _j(obj) -> str:
+    return _ENCODER.encode(obj)
+
+
+def _template(obj) -> str:
+    """``obj`` as compact JSON with ``_SLOT`` values as ``%s``, ``_QSLOT`` as ``"%s"`` (other
+    ``%`` doubled); ``_STAMP`` stays a marker (``"\\u0002"``) to replace once per step."""
+    return (_j(obj).replace("%", "%%").replace('"\\u0000"', "%s").replace('"\\u0001"', '"%s"'))
+
+
+_STAMP_TEXT = _j(_STAMP)
+
 
 def _stamp(ns: int) -> dict:
     return {"sec": ns // 1_000_000_000, "nsec": ns % 1_000_000_000}
 
 
-def _quat(yaw: float) -> dict:
-    return {"x": 0.0, "y": 0.0, "z": float(np.sin(yaw / 2)), "w": float(np.cos(yaw / 2))}
+_ZERO_POSE = {"position": {"x": 0.0, "y": 0.0, "z": 0.0},
+              "orientation": {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0}}  # the pose at (0, 0), heading 0
+_MEMBER = _template({"id": _SLOT, "index": _SLOT})
+_CLAIM_POINT = _template({"x": _SLOT, "y": _SLOT, "z": 0.05})
+_EDGE_POINT = _template({"x": _SLOT, "y": _SLOT, "z": 0.1})
+_CLAIM = _template({"timestamp": _STAMP, "frame_id": _FRAME, "id": _SLOT, "lifetime": _stamp(0),
+                    "frame_locked": False, "metadata": [], "cubes": [], "spheres": [],
+                    "lines": [{"type": 1, "pose": _ZERO_POSE, "thickness": 0.15, "scale_invariant": False,
+                               "points": [_SLOT], "color": _SLOT, "colors": [], "indices": []}]})
+_CONFLICTS = _template({"timestamp": _STAMP, "frame_id": _FRAME, "id": "conflicts", "lifetime": _stamp(0),
+                        "frame_locked": False, "metadata": [], "cubes": [], "spheres": [],
+                        "lines": [{"type": 2, "pose": _ZERO_POSE, "thickness": 0.1, "scale_invariant": False,
+                                   "points": [_SLOT], "color": _RED, "colors": [], "indices": []}]})
+_CLEAR = _template([{"timestamp": _STAMP, "type": 1, "id": ""}])
+_COLOURS = (_j(_GREY), _j(_RED), _j(_GREEN))  # not asking, denied, granted
+# The waypoint-derived runs of text of one vehicle; each fills one slot of the class templates.
+_WP_VEHICLE = '%s,"waypoint":%s,"waypoints":%s,"wx_m":%s,"wy_m":%s'  # from "heading_rad":
+_WP_QUAT = '%s,"w":%s'  # from the cube's "orientation":{..,"z":
+_WP_SPHERE = '%s,"y":%s'  # from the sphere's "position":{"x":
 
 
-def _pose(x: float, y: float, yaw: float = 0.0, z: float = 0.0) -> dict:
-    return {"position": {"x": float(x), "y": float(y), "z": z}, "orientation": _quat(yaw)}
+def _class_templates(c: str, vc) -> tuple[str, str]:
+    """Templates of one vehicle of class ``c`` in ``/vehicles`` and in ``/scene/vehicles``; the
+    slots marked ``_WP`` take the ``_WP_*`` runs (the keys after them are in the runs)."""
+    vehicle = _template({"id": _SLOT, "vclass": c, "x_m": _SLOT, "y_m": _SLOT, "vx_mps": _SLOT,
+                         "vy_mps": _SLOT, "heading_rad": _SLOT,  # _WP: .. "wy_m"
+                         "index": _SLOT})
+    entity = _template({
+        "timestamp": _STAMP, "frame_id": _FRAME, "id": _SLOT, "lifetime": _stamp(0), "frame_locked": False,
+        "metadata": [{"key": "class", "value": c}, {"key": "index", "value": _QSLOT}],
+        "cubes": [{"pose": {"position": {"x": _SLOT, "y": _SLOT, "z": 0.75},
+                            "orientation": {"x": 0.0, "y": 0.0, "z": _SLOT}},  # _WP: .. "w"
+                   "size": {"x": vc.length, "y": vc.width, "z": 1.5}, "color": _BLUE}],
+        "spheres": [{"pose": {"position": {"x": _SLOT, "z": 0.0},  # _WP: .. "y"
+                              "orientation": {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0}},
+                     "size": {"x": 0.8, "y": 0.8, "z": 0.8}, "color": _ORANGE}],
+        "lines": []})
+    return vehicle, entity
+
+
+def _fill(template: str, n: int, *columns) -> str:
+    """``n`` copies of ``template`` joined by commas, slot ``i`` of copy ``j`` filled with ``columns[i][j]``."""
+    if n == 0:
+        return ""
+    return (",".join([template] * n)) % tuple(chain.from_iterable(zip(*columns)))
+
+
+def _floats(a) -> list[str]:
+    """JSON text of each value of ``a`` (flattened), as ``json.dumps`` writes a float."""
+    a = np.asarray(a, dtype=float).reshape(-1)
+    values = a.tolist()
+    if np.isfinite(a).all():
+        return list(map(_REPR, values))
+    return [_j(v) for v in values]
+
+
+def _row_keys(a) -> list[bytes]:
+    """The bytes of each row of 2-D ``a`` as float64 (exact keys: NaN finds NaN, -0.0 is not 0.0)."""
+    a = np.ascontiguousarray(a, dtype=float)
+    return a.view(np.dtype((np.void, a.shape[1] * 8))).reshape(-1).tolist()
+
+
+class _TextCache:
+    """Text by key (rows of numbers by their bytes, ids by themselves).  What repeats is mostly
+    the previous step's rows, so once it holds more than three lookups' worth (plus ``spare``)
+    it keeps only the rows of the current lookup: its size follows the fleet."""
+
+    def __init__(self, spare: int = 1000):
+        self.spare = spare
+        self.text: dict = {}
+
+    def get(self, keys: list, make) -> list:
+        """The text of each key; ``make(rows)`` makes the missing ones (``rows``: their positions)."""
+        out = list(map(self.text.get, keys))
+        if None in out:
+            rows = [j for j, t in enumerate(out) if t is None]
+            for j, t in zip(rows, make(np.asarray(rows, dtype=np.intp))):
+                out[j] = t
+            if len(self.text) + len(rows) > 3 * len(keys) + self.spare:
+                self.text = dict(zip(keys, out))
+            else:
+                self.text.update((keys[j], out[j]) for j in rows)
+        return out
 
 
 class McapLogger:
@@ -158,12 +276,17 @@ class McapLogger:
         self.messages = 0
         self.total_ms = 0.0
         self.closed = False
+        self._wp_text = _TextCache()  # waypoint rows -> their three runs of text
+        self._claim_text = _TextCache()  # claim polygons -> their points' text
+        self._id_text = _TextCache()  # vehicle id -> its JSON string
+        self._claim_id_text = _TextCache()  # vehicle id -> the JSON string "claim/<id>"
+        self._class_text: dict[tuple, tuple[str, str]] = {}
 
     # ------------------------------------------------------------------ writing
-    def _put(self, topic: str, ns: int, msg: dict) -> None:
+    def _put(self, topic: str, ns: int, text: str) -> None:
         self._seq += 1
-        self._w.add_message(self._ch[topic], log_time=ns, data=json.dumps(msg, separators=(",", ":")).encode(),
-                            publish_time=ns, sequence=self._seq)
+        self._w.add_message(self._ch[topic], log_time=ns, data=text.encode(), publish_time=ns,
+                            sequence=self._seq)
         self.messages += 1
 
     def on_step(self, sim, state, decision, row) -> None:
@@ -172,32 +295,51 @@ class McapLogger:
         Ts = float(sim.settings.Ts)
         t_end = float(row["t_s"]) + Ts
         ns = int(round(t_end * 1e9))
-        vehicles, cubes_entities, idx = [], [], []
+        stamp = '{"sec":%d,"nsec":%d}' % divmod(ns, 1_000_000_000)  # as _j(_stamp(ns))
+        # the fleet's columns, class after class: one conversion to text for all classes
+        classes, X, cen, hd, k, count, lv, vids = [], [], [], [], [], [], [], []
         for c, g in sim.groups.items():
             if not g.ids:
                 continue
-            cen, hd, _ = g.centres()
-            vc = g.vclass
-            for j, vid in enumerate(g.ids):
-                x, y, vx, vy = (float(v) for v in g.X[j, :4])
-                h = float(hd[j])
-                vehicles.append({"id": vid, "vclass": c, "x_m": x, "y_m": y, "vx_mps": vx, "vy_mps": vy,
-                                 "heading_rad": h, "waypoint": int(g.k[j]), "waypoints": int(len(g.W[j])),
-                                 "wx_m": float(cen[j, 0]), "wy_m": float(cen[j, 1]), "index": int(g.l[j])})
-                idx.append({"id": vid, "index": int(g.l[j])})
-                cubes_entities.append({
-                    "timestamp": _stamp(ns), "frame_id": _FRAME, "id": vid, "lifetime": _stamp(0),
-                    "frame_locked": False, "metadata": [{"key": "class", "value": c},
-                                                        {"key": "index", "value": str(int(g.l[j]))}],
-                    "cubes": [{"pose": _pose(x, y, h, 0.75), "size": {"x": vc.length, "y": vc.width, "z": 1.5},
-                               "color": _BLUE}],
-                    "spheres": [{"pose": _pose(cen[j, 0], cen[j, 1]), "size": {"x": 0.8, "y": 0.8, "z": 0.8},
-                                 "color": _ORANGE}],
-                    "lines": []})
-        self._put("/vehicles", ns, {"t_s": t_end, "vehicles": vehicles})
-        self._put("/membership", ns, {"t_s": t_end, "vehicles": idx})
-        clear = [{"timestamp": _stamp(ns), "type": 1, "id": ""}]
-        self._put("/scene/vehicles", ns, {"deletions": clear, "entities": cubes_entities})
+            key = (c, g.vclass.length, g.vclass.width)
+            tmpl = self._class_text.get(key)
+            if tmpl is None:
+                tmpl = self._class_text[key] = _class_templates(c, g.vclass)
+            classes.append((tmpl, len(g.ids)))
+            cen_g, hd_g, _ = g.centres()
+            X.append(g.X[:, :4])
+            cen.append(cen_g)
+            hd.append(hd_g)
+            k.append(g.k)
+            lv.append(g.l)
+            count += [len(w) for w in g.W]
+            vids += g.ids
+        vehicles, entities, members = [], [], ""
+        if classes:
+            n = len(vids)
+            ids = self._id_text.get(vids, lambda rows: [json.dumps(vids[j]) for j in rows])
+            xy = _floats(np.concatenate(X).T)  # x, then y, vx, vy of every vehicle
+            x, y, vx, vy = (xy[i * n:(i + 1) * n] for i in range(4))
+            lv = np.concatenate(lv).astype(int).tolist()
+            wp = np.empty((n, 5))  # heading, waypoint x, y, its index, the route's waypoints
+            wp[:, 0] = np.concatenate(hd)
+            wp[:, 1:3] = np.concatenate(cen)
+            wp[:, 3] = np.concatenate(k)
+            wp[:, 4] = count
+            runs = self._wp_text.get(_row_keys(wp), lambda rows: self._waypoint_runs(wp[rows]))
+            wv, wq, ws = zip(*runs)
+            o = 0
+            for (tv, te), m in classes:
+                s = slice(o, o + m)
+                vehicles.append(_fill(tv, m, ids[s], x[s], y[s], vx[s], vy[s], wv[s], lv[s]))
+                entities.append(_fill(te.replace(_STAMP_TEXT, stamp), m, ids[s], lv[s], x[s], y[s], wq[s], ws[s]))
+                o += m
+            members = _fill(_MEMBER, n, ids, lv)
+        t_text = _REPR(t_end) if math.isfinite(t_end) else _j(t_end)
+        self._put("/vehicles", ns, '{"t_s":%s,"vehicles":[%s]}' % (t_text, ",".join(vehicles)))
+        self._put("/membership", ns, '{"t_s":%s,"vehicles":[%s]}' % (t_text, members))
+        clear = _CLEAR.replace(_STAMP_TEXT, stamp)
+        self._put("/scene/vehicles", ns, '{"deletions":%s,"entities":[%s]}' % (clear, ",".join(entities)))
         if state is not None and decision is not None:
             ids = list(decision.ids)
             req = np.asarray(decision.requesting, dtype=bool)
@@ -205,42 +347,56 @@ class McapLogger:
             forced = np.asarray(decision.forced, dtype=bool)
             edges = np.asarray(decision.edges, dtype=int).reshape(-1, 2)
             kinds = [str(k) for k in np.asarray(decision.edge_kinds).reshape(-1)]
-            self._put("/tm/decision", ns, {
-                "t_s": float(row["t_s"]), "requests": [v for v, r in zip(ids, req) if r],
-                "granted": [v for v, r in zip(ids, go) if r], "denied": list(decision.stopped),
-                "forced": [v for v, r in zip(ids, forced) if r],
-                "edges": [{"from": ids[u], "to": ids[v], "kind": k} for (u, v), k in zip(edges, kinds)],
-                "tm_ms": float(row.get("tm_ms", 0.0))})
+            self._put("/tm/decision", ns, _j({
+                "t_s": float(row["t_s"]), "requests": list(compress(ids, req.tolist())),
+                "granted": list(compress(ids, go.tolist())), "denied": list(decision.stopped),
+                "forced": list(compress(ids, forced.tolist())),
+                "edges": [{"from": ids[u], "to": ids[v], "kind": k} for (u, v), k in zip(edges.tolist(), kinds)],
+                "tm_ms": float(row.get("tm_ms", 0.0))}))
             if self.level == "full":
-                self._put("/scene/claims", ns, self._claims_scene(ns, ids, req, go, edges, decision, state))
+                self._put("/scene/claims", ns, self._claims_scene(stamp, clear, ids, req, go, edges, decision, state))
         elif self.level == "full":
-            self._put("/scene/claims", ns, {"deletions": clear, "entities": []})
+            self._put("/scene/claims", ns, '{"deletions":%s,"entities":[]}' % clear)
         ms = (time.perf_counter() - t0) * 1e3
         self.total_ms += ms
         row["logging_ms"] = round(ms, 4)
 
     @staticmethod
-    def _claims_scene(ns, ids, req, go, edges, decision, state) -> dict:
-        polys = decision.claims.polygons()
+    def _waypoint_runs(wp) -> list[tuple[str, str, str]]:
+        """The ``_WP_*`` runs of text of waypoint rows ``(heading, x, y, k, count)``."""
+        m = len(wp)
+        text = _floats(np.concatenate([wp[:, :3].T.reshape(-1), np.sin(wp[:, 0] / 2), np.cos(wp[:, 0] / 2)]))
+        h, cx, cy, qz, qw = (text[i * m:(i + 1) * m] for i in range(5))
+        k, count = wp[:, 3:5].astype(int).T.tolist()
+        return [(_WP_VEHICLE % v, _WP_QUAT % q, _WP_SPHERE % s) for v, q, s in
+                zip(zip(h, k, count, cx, cy), zip(qz, qw), zip(cx, cy))]
+
+    def _claims_scene(self, stamp, clear, ids, req, go, edges, decision, state) -> str:
+        n = len(ids)
         ents = []
-        for i, vid in enumerate(ids):
-            col = _GREEN if go[i] else _RED if req[i] else _GREY
-            pts = [{"x": float(p[0]), "y": float(p[1]), "z": 0.05} for p in polys[i]]
-            ents.append({"timestamp": _stamp(ns), "frame_id": _FRAME, "id": f"claim/{vid}", "lifetime": _stamp(0),
-                         "frame_locked": False, "metadata": [], "cubes": [], "spheres": [],
-                         "lines": [{"type": 1, "pose": _pose(0.0, 0.0), "thickness": 0.15, "scale_invariant": False,
-                                    "points": pts, "color": col, "colors": [], "indices": []}]})
+        if n:
+            polys = np.asarray(decision.claims.polygons(), dtype=float)[:n]
+            K = polys.shape[1]
+            if K:
+                flat = polys.reshape(n, 2 * K)
+                points_tmpl = ",".join([_CLAIM_POINT] * K)
+
+                def make(rows):  # one string of all rows' points, split on a byte JSON text never has
+                    return (("\x00".join([points_tmpl] * len(rows))) % tuple(_floats(flat[rows]))).split("\x00")
+
+                points = self._claim_text.get(_row_keys(flat), make)
+            else:
+                points = [""] * n
+            colour = [_COLOURS[i] for i in (go.astype(np.intp) * 2 + (req & ~go)).tolist()]
+            ents.append(_fill(_CLAIM.replace(_STAMP_TEXT, stamp), n,
+                              self._claim_id_text.get(ids, lambda rows: [json.dumps(f"claim/{ids[j]}") for j in rows]),
+                              points, colour))
         if len(edges):
             C = np.asarray(state.centre, dtype=float)
-            pts = []
-            for u, v in edges:
-                pts += [{"x": float(C[u, 0]), "y": float(C[u, 1]), "z": 0.1},
-                        {"x": float(C[v, 0]), "y": float(C[v, 1]), "z": 0.1}]
-            ents.append({"timestamp": _stamp(ns), "frame_id": _FRAME, "id": "conflicts", "lifetime": _stamp(0),
-                         "frame_locked": False, "metadata": [], "cubes": [], "spheres": [],
-                         "lines": [{"type": 2, "pose": _pose(0.0, 0.0), "thickness": 0.1, "scale_invariant": False,
-                                    "points": pts, "color": _RED, "colors": [], "indices": []}]})
-        return {"deletions": [{"timestamp": _stamp(ns), "type": 1, "id": ""}], "entities": ents}
+            ends = C[edges.reshape(-1)][:, :2]  # u, v of each edge, in order
+            ents.append(_CONFLICTS.replace(_STAMP_TEXT, stamp)
+                        % _fill(_EDGE_POINT, len(ends), _floats(ends[:, 0]), _floats(ends[:, 1])))
+        return '{"deletions":%s,"entities":[%s]}' % (clear, ",".join(ents))
 
     # ------------------------------------------------------------------ closing
     def close(self) -> None:
