@@ -296,6 +296,7 @@ class Cosim:
         self.zone_holder: list[str | None] = [None] * len(self.zones)
         self.zone_wait: dict[tuple[int, str], int] = {}
         self._where: dict = {}  # vehicle id -> (group, row), refreshed by _gate
+        self._exit_slot: dict = {}  # (vehicle, zone, waypoint) -> exit slot box or None
 
     # -------------------------------------------------------------- state
     def _fleet(self, with_requests: bool):
@@ -352,22 +353,29 @@ class Cosim:
         other vehicle's current claim box meets it.
         """
         g, j = self._where[vid]
-        W, k = g.W[j], int(g.k[j])
-        r0 = float(np.abs(self.families[g.vclass.name].position_sets[0]).max()) \
-            + 0.5 * float(np.hypot(g.vclass.length, g.vclass.width))
-        lo_z, hi_z = self.zone_lo[z], self.zone_hi[z]
-        Wk = W[k + 1:]
-        inside = (Wk[:, 0] - r0 <= hi_z[0]) & (Wk[:, 0] + r0 >= lo_z[0]) & \
-            (Wk[:, 1] - r0 <= hi_z[1]) & (Wk[:, 1] + r0 >= lo_z[1])
-        if not inside.any():
-            return True  # the route does not cross the guard beyond here
-        first_in = int(np.argmax(inside))
-        out = np.nonzero(~inside[first_in:])[0]
-        if len(out) == 0:
-            return True  # the route ends inside the guard: it arrives there
-        e = k + 1 + first_in + int(out[0])
-        lo, hi = W[e] - r0, W[e] + r0
-        hit = np.all((cur_lo <= hi) & (cur_hi >= lo), axis=1)
+        k = int(g.k[j])
+        key = (vid, z, k)
+        if key not in self._exit_slot:  # depends on the route and the waypoint only
+            W = g.W[j]
+            r0 = float(np.abs(self.families[g.vclass.name].position_sets[0]).max()) \
+                + 0.5 * float(np.hypot(g.vclass.length, g.vclass.width))
+            lo_z, hi_z = self.zone_lo[z], self.zone_hi[z]
+            Wk = W[k + 1:]
+            inside = (Wk[:, 0] - r0 <= hi_z[0]) & (Wk[:, 0] + r0 >= lo_z[0]) & \
+                (Wk[:, 1] - r0 <= hi_z[1]) & (Wk[:, 1] + r0 >= lo_z[1])
+            slot = None
+            if inside.any():  # else the route does not cross the guard beyond here
+                first_in = int(np.argmax(inside))
+                out = np.nonzero(~inside[first_in:])[0]
+                if len(out):  # else the route ends inside the guard: it arrives there
+                    e = k + 1 + first_in + int(out[0])
+                    slot = (W[e] - r0, W[e] + r0)
+            self._exit_slot[key] = slot
+        slot = self._exit_slot[key]
+        if slot is None:
+            return True
+        lo, hi = slot
+        hit = (cur_lo[:, 0] <= hi[0]) & (cur_hi[:, 0] >= lo[0]) & (cur_lo[:, 1] <= hi[1]) & (cur_hi[:, 1] >= lo[1])
         hit[pos[vid]] = False
         return not hit.any()
 
@@ -388,6 +396,8 @@ class Cosim:
         new_lo, new_hi = self.tm.claims(new).aabb()
         want = self._zone_hits(new_lo, new_hi) & ~cur_hits & req[:, None]
         self._where = {v: (g, j) for g in self.groups.values() for j, v in enumerate(g.ids)}
+        if len(self._exit_slot) > 100_000:  # stale (vehicle, waypoint) keys: start over
+            self._exit_slot.clear()
         for z in map(int, np.nonzero(want.any(axis=0))[0]):
             cand = [state.ids[i] for i in np.nonzero(want[:, z])[0]]
             for v in cand:
@@ -533,7 +543,9 @@ class Cosim:
         else:
             # A new vehicle appears NOW: it must miss where the others are now (P^l), not only
             # their claims from the next step on (P^{l-1}).  Claims of index l+1 are P^l.
-            top = np.array([self.families[str(c)].N for c in cur.family])
+            top = np.zeros(len(cur.family), dtype=np.intp)
+            for c, f in self.families.items():
+                top[cur.family == c] = f.N
             cur = FleetState(ids=cur.ids, family=cur.family, centre=cur.centre,
                              index=np.minimum(cur.index + 1, top), heading=cur.heading, length=cur.length,
                              width=cur.width)
