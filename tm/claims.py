@@ -78,32 +78,32 @@ class Claims:
         return Claims(first.table, *(np.concatenate([getattr(c, f) for c in parts])
                                      for f in ("family", "centre", "index", "heading", "length", "width")))
 
-    def _half_extent(self) -> np.ndarray:
-        a, b = 0.5 * self.length, 0.5 * self.width
-        c, s = np.abs(np.cos(self.heading)), np.abs(np.sin(self.heading))
-        return np.stack([a * c + b * s, a * s + b * c], axis=1)
-
     def aabb(self) -> tuple[np.ndarray, np.ndarray]:
         """Bounding boxes ``(lo, hi)`` of the union claims; they contain every ``timed`` polygon too."""
         rows = self.table.rows(self.family, np.maximum(self.index - 1, 0))
-        e = self._half_extent()
-        lo, hi = self.table.lo[rows].copy(), self.table.hi[rows].copy()
+        c, s = np.cos(self.heading), np.sin(self.heading)
+        ac, as_ = np.abs(c), np.abs(s)
+        a, b = 0.5 * self.length, 0.5 * self.width          # footprint half extents, turned
+        ex, ey = a * ac + b * as_, a * as_ + b * ac
+        lo, hi = self.table.lo[rows], self.table.hi[rows]   # copies (fancy indexing)
         rot = self.table.rotate[self.family]
         if rot.any():  # road-frame sets turn with the heading: box of the rotated hull
             box = rot & self.table.hull_box[rows]
             if box.any():  # a rectangle [lo, hi] turned by θ: centre turned, |R| half extents
-                r, h = rows[box], self.heading[box]
-                c, s = np.cos(h), np.sin(h)
-                mx, my = 0.5 * (lo[box, 0] + hi[box, 0]), 0.5 * (lo[box, 1] + hi[box, 1])
-                hx, hy = 0.5 * (hi[box, 0] - lo[box, 0]), 0.5 * (hi[box, 1] - lo[box, 1])
-                ex, ey = np.abs(c) * hx + np.abs(s) * hy, np.abs(s) * hx + np.abs(c) * hy
-                cx, cy = c * mx - s * my, s * mx + c * my
-                lo[box] = np.column_stack([cx - ex, cy - ey])
-                hi[box] = np.column_stack([cx + ex, cy + ey])
+                sel = slice(None) if box.all() else box
+                L, H = lo[sel], hi[sel]
+                mx, my = 0.5 * (L[:, 0] + H[:, 0]), 0.5 * (L[:, 1] + H[:, 1])
+                hx, hy = 0.5 * (H[:, 0] - L[:, 0]), 0.5 * (H[:, 1] - L[:, 1])
+                cb, sb, acb, asb = c[sel], s[sel], ac[sel], as_[sel]
+                rx, ry = acb * hx + asb * hy, asb * hx + acb * hy
+                cx, cy = cb * mx - sb * my, sb * mx + cb * my
+                lo[sel, 0], lo[sel, 1] = cx - rx, cy - ry
+                hi[sel, 0], hi[sel, 1] = cx + rx, cy + ry
             other = rot & ~box
             if other.any():
                 P = _rotate(self.table.hulls[rows[other]], self.heading[other])
                 lo[other], hi[other] = P.min(axis=1), P.max(axis=1)
+        e = np.column_stack([ex, ey])
         return self.centre + lo - e, self.centre + hi + e
 
     def _polygons(self, stack: np.ndarray, level: np.ndarray, idx) -> np.ndarray:

@@ -274,8 +274,8 @@ def broad_phase(lo, hi, tol: float = GEOMETRY_TOL, mask=None, cell: float | None
     keep &= (np.minimum(x1[bi], x1[bj]) >= cx) & (np.minimum(y1[bi], y1[bj]) >= cy)
     bi, bj = bi[keep], bj[keep]
     i, j = np.minimum(bi, bj), np.maximum(bi, bj)
-    order = np.lexsort((j, i))
-    return i[order], j[order]
+    packed = np.sort(i * n + j, kind="stable")                   # sorted by (i, j): one int sort, not lexsort
+    return packed // n, packed % n
 
 
 # ----------------------------------------------------------------------------- narrow phase

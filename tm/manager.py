@@ -29,6 +29,7 @@ import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from functools import cached_property
+from itertools import compress, repeat
 
 import networkx as nx
 import numpy as np
@@ -306,7 +307,7 @@ def _decision(state: FleetState, c: _Conflicts, go_r: np.ndarray, waited_r: np.n
     waited = np.zeros(V, dtype=np.int64)
     waited[c.req] = waited_r
     return Decision(ids=state.ids, requesting=state.requesting, go=go,
-                    stopped=tuple(state.ids[v] for v in c.req[~go_r]), forced=forced, waited=waited,
+                    stopped=tuple(map(state.ids.__getitem__, c.req[~go_r].tolist())), forced=forced, waited=waited,
                     edges=c.edges, edge_kinds=c.edge_kinds, claims=_result_claims(c, go_r),
                     timings=Timings(*c.seconds, t_select))
 
@@ -399,14 +400,15 @@ class TrafficManager:
         s = self.settings
         c = _requester_conflicts(self.table, state, s.check)
         t0 = time.perf_counter()
-        req_ids = [state.ids[v] for v in c.req]
-        waited_r = np.array([self._waited.get(v, 0) for v in req_ids], dtype=np.int64)
+        req_ids = list(map(state.ids.__getitem__, c.req.tolist()))
+        waited_r = np.fromiter(map(self._waited.get, req_ids, repeat(0)), dtype=np.int64, count=len(req_ids))
         if s.policy == "greedy":
             go_r = select_greedy(len(c.req), c.fixed_hits, c.leq, c.excl, self._rng)
         else:
             go_r = select_optimal(len(c.req), c.fixed_hits, c.leq, c.excl, s.starvation_horizon + waited_r,
                                   self._rng, s.exhaustive_max, s.milp_time_limit)
-        self._waited = {v: int(w) + 1 for v, w, g in zip(req_ids, waited_r, go_r) if not g}
+        stop = ~np.asarray(go_r, dtype=bool)
+        self._waited = dict(zip(compress(req_ids, stop.tolist()), (waited_r[stop] + 1).tolist()))
         decision = _decision(state, c, go_r, waited_r, time.perf_counter() - t0)
         if s.verify:
             i, j = conflicting_pairs(decision.claims, s.check)
