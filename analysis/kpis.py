@@ -51,7 +51,7 @@ VEHICLE_COLUMNS = ("id", "vclass", "departure_s", "admitted_s", "admission_delay
 
 #: Columns of the per-step table every run has (others, e.g. ``min_separation_m``, are kept).
 STEP_COLUMNS = ("t_s", "active", "requests", "grants", "denials", "edges", "admitted", "tm_ms", "tm_decide_ms",
-                "controller_ms", "world_ms", "logging_ms")
+                "request_ms", "gate_ms", "controller_ms", "world_ms", "logging_ms")
 
 
 def read_tripinfo(path) -> pd.DataFrame:

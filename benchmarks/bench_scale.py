@@ -35,8 +35,9 @@ simulated second"; they add up to ``total_s_per_sim_s`` = 1 / ``rtf_window``):
 * ``sumo_s_per_sim_s``: the SUMO calls above, split into ``sumo_move_s_per_sim_s``
   (``moveToXY`` of every vehicle), ``sumo_step_s_per_sim_s`` (``simulationStep`` and reading
   departures, arrivals, collisions) and ``sumo_insert_s_per_sim_s`` (insertion, removal);
-  ``controllers_s_per_sim_s``: ``controller_ms`` (QPs, plant step, index update);
-  ``tm_s_per_sim_s``: ``tm_ms`` (request indices, junction tokens, decision);
+  ``controllers_s_per_sim_s``: ``controller_ms + request_ms`` (QPs, plant step, index update,
+  and the vehicles' request indices: the ST-MPC index at the next waypoint, On-1);
+  ``tm_s_per_sim_s``: ``tm_ms - request_ms`` (fleet assembly, junction tokens, decision);
   ``monitor_s_per_sim_s``: ``world_ms`` minus its SUMO calls (runtime monitor with its claims,
   pose conversion); ``logging_s_per_sim_s``: ``logging_ms`` (MCAP); ``other_s_per_sim_s``: total
   minus these parts (fleet assembly, arrivals, admission tests, halt counting, bookkeeping);
@@ -44,9 +45,14 @@ simulated second"; they add up to ``total_s_per_sim_s`` = 1 / ``rtf_window``):
 * ``active_max``, ``active_mean``, ``active_min``: vehicles in the network (``steps.csv``
   ``active``) over the window; ``demand`` the trips generated (``demand_requested`` asked for),
   ``admitted``, ``arrived`` by the end; ``requests_per_step``, ``grants_per_step``;
-* ``controller_us_per_vehicle_step``: window sum of ``controller_ms`` / window sum of ``active``;
-* ``tm_ms_per_decision``, ``tm_decide_ms_per_decision``: mean ``tm_ms`` / ``tm_decide_ms`` over
-  the window's steps that made a decision (``tm_decide_ms > 0``);
+* ``controller_us_per_vehicle_step``: window sum of ``controller_ms + request_ms`` / window sum
+  of ``active`` (membership indices and QPs); ``controller_us_per_vehicle_step_median``: the
+  median over the window's steps of the same ratio per step;
+* ``tm_ms_per_decision``, ``tm_decide_ms_per_decision``: mean ``tm_ms - request_ms`` /
+  ``tm_decide_ms`` over the window's steps that made a decision (``tm_decide_ms > 0``);
+  ``tm_decide_ms_median``: the median of ``tm_decide_ms`` there (``TrafficManager.decide``
+  alone); ``tm_gate_ms_per_decision``, ``request_ms_per_decision``: mean ``gate_ms`` (the
+  co-simulation's junction tokens) and ``request_ms`` there;
 * ``rtf_window``: window simulated seconds / window wall seconds; ``rtf``, ``wall_s``: the
   whole ``run_sumo`` call as its ``summary.json`` reports it (start-up, the loop, writing the
   tables); ``loop_s``: from the end of the first step to the end of the last; ``setup_s``:
@@ -116,7 +122,8 @@ CHILD_STEPS = "scale_steps.csv"
 PRINTED = ["target", "junctions", "demand", "active_max", "active_mean", "sumo_s_per_sim_s",
            "controllers_s_per_sim_s", "tm_s_per_sim_s", "monitor_s_per_sim_s", "logging_s_per_sim_s",
            "other_s_per_sim_s", "total_s_per_sim_s", "rtf_window", "controller_us_per_vehicle_step",
-           "tm_ms_per_decision", "peak_rss_mb", "wall_s", "sumo_wall_s", "sumo_rtf", "wall_ratio"]
+           "controller_us_per_vehicle_step_median", "tm_ms_per_decision", "tm_decide_ms_median",
+           "peak_rss_mb", "wall_s", "sumo_wall_s", "sumo_rtf", "wall_ratio"]
 PARTS = ("sumo", "controllers", "tm", "monitor", "logging", "other")
 
 
@@ -408,9 +415,14 @@ def window_figures(steps: pd.DataFrame, timed: pd.DataFrame, warmup_s: float, Ts
     sim_s = len(w) * Ts
     total = w["timed_wall_ms"].sum() / 1e3
     sumo = {k: w[f"timed_sumo_{k}_ms"].sum() / 1e3 for k in ("move", "step", "insert")}
+    # the vehicles' request indices (ST-MPC index at the next waypoint) are controller work,
+    # timed inside tm_ms; older step tables have no request_ms / gate_ms (zeros then)
+    req_ms = w["request_ms"] if "request_ms" in w else pd.Series(0.0, index=w.index)
+    gate_ms = w["gate_ms"] if "gate_ms" in w else pd.Series(0.0, index=w.index)
+    ctl_ms = w["controller_ms"] + req_ms
     parts = {"sumo": sum(sumo.values()),
-             "controllers": w["controller_ms"].sum() / 1e3,
-             "tm": w["tm_ms"].sum() / 1e3,
+             "controllers": ctl_ms.sum() / 1e3,
+             "tm": (w["tm_ms"] - req_ms).sum() / 1e3,
              "monitor": (w["world_ms"].sum() - w["timed_sumo_move_ms"].sum() - w["timed_sumo_step_ms"].sum()) / 1e3,
              "logging": w["logging_ms"].sum() / 1e3}
     parts["other"] = total - sum(parts.values())
@@ -426,11 +438,18 @@ def window_figures(steps: pd.DataFrame, timed: pd.DataFrame, warmup_s: float, Ts
         out[f"{k}_share"] = parts[k] / total if total > 0 else float("nan")
     out["rtf_window"] = sim_s / total if total > 0 else float("nan")
     vs = w["active"].sum()
-    out["controller_us_per_vehicle_step"] = w["controller_ms"].sum() * 1e3 / vs if vs else float("nan")
+    out["controller_us_per_vehicle_step"] = ctl_ms.sum() * 1e3 / vs if vs else float("nan")
+    busy = w["active"] > 0
+    out["controller_us_per_vehicle_step_median"] = (
+        float((ctl_ms[busy] * 1e3 / w["active"][busy]).median()) if busy.any() else float("nan"))
     dec = w[w["tm_decide_ms"] > 0]
+    nan = float("nan")
     out["decisions"] = len(dec)
-    out["tm_ms_per_decision"] = float(dec["tm_ms"].mean()) if len(dec) else float("nan")
-    out["tm_decide_ms_per_decision"] = float(dec["tm_decide_ms"].mean()) if len(dec) else float("nan")
+    out["tm_ms_per_decision"] = float((dec["tm_ms"] - req_ms[dec.index]).mean()) if len(dec) else nan
+    out["tm_decide_ms_per_decision"] = float(dec["tm_decide_ms"].mean()) if len(dec) else nan
+    out["tm_decide_ms_median"] = float(dec["tm_decide_ms"].median()) if len(dec) else nan
+    out["tm_gate_ms_per_decision"] = float(gate_ms[dec.index].mean()) if len(dec) else nan
+    out["request_ms_per_decision"] = float(req_ms[dec.index].mean()) if len(dec) else nan
     out["requests_per_step"] = float(w["requests"].mean())
     out["grants_per_step"] = float(w["grants"].mean())
     return out

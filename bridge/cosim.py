@@ -297,6 +297,7 @@ class Cosim:
         self.zone_wait: dict[tuple[int, str], int] = {}
         self._where: dict = {}  # vehicle id -> (group, row), refreshed by _gate
         self._exit_slot: dict = {}  # (vehicle, zone, waypoint) -> exit slot box or None
+        self._ms_request = self._ms_gate = 0.0  # this step's request indices and junction tokens
 
     # -------------------------------------------------------------- state
     def _fleet(self, with_requests: bool):
@@ -314,8 +315,10 @@ class Cosim:
             Ln.append(np.full(len(g.ids), g.vclass.length))
             Wd.append(np.full(len(g.ids), g.vclass.width))
             if with_requests:
+                tr = time.perf_counter()
                 nxt, nh, has = g.centres(1)
                 lp = g.ctl.index(g.X, nxt, nh)
+                self._ms_request += (time.perf_counter() - tr) * 1e3
                 g.req_l = lp
                 may = has & (lp <= g.ctl.N)
                 if self.settings.switching == "terminal":
@@ -333,7 +336,9 @@ class Cosim:
         state = FleetState(ids=ids, family=np.array(fam), centre=np.vstack(C), index=cat(L), heading=cat(H),
                            length=cat(Ln), width=cat(Wd), **kw)
         if with_requests and self.zones:
+            tg = time.perf_counter()
             state = self._gate(state)
+            self._ms_gate += (time.perf_counter() - tg) * 1e3
         return state
 
     def _zone_hits(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
@@ -426,6 +431,7 @@ class Cosim:
         t_s = self.t * s.Ts
         row = {"t_s": round(t_s, 6)}
         tt = time.perf_counter()
+        self._ms_request = self._ms_gate = 0.0
         state = self._fleet(with_requests=True)
         n_req = n_go = 0
         ms_tm = ms_decide = 0.0
@@ -508,7 +514,8 @@ class Cosim:
             self.collisions_world.add(tuple(sorted(pair)))
         row.update(active=0 if cur is None else len(cur.ids), requests=n_req, grants=n_go,
                    denials=n_req - n_go, admitted=admitted, tm_ms=round(ms_tm, 4),
-                   tm_decide_ms=round(ms_decide, 4),
+                   tm_decide_ms=round(ms_decide, 4), request_ms=round(self._ms_request, 4),
+                   gate_ms=round(self._ms_gate, 4),
                    controller_ms=round(ms_ctl, 4), world_ms=round((time.perf_counter() - tw) * 1e3, 4))
         self.step_rows.append(row)
         for obs in self.observers:

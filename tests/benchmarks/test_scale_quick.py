@@ -94,6 +94,16 @@ def test_window_figures_split_the_step_time():
     assert f["total_s_per_sim_s"] == pytest.approx(0.2) and f["rtf_window"] == pytest.approx(5.0)
     assert f["controller_us_per_vehicle_step"] == pytest.approx(300.0)
     assert f["decisions"] == 6 and f["tm_decide_ms_per_decision"] == 1.0 and f["tm_ms_per_decision"] == 2.0
+    assert f["controller_us_per_vehicle_step_median"] == pytest.approx(300.0)
+    assert f["tm_decide_ms_median"] == 1.0
+    # request indices (timed inside tm_ms) move from the TM to the controllers
+    f2 = b.window_figures(steps.assign(request_ms=0.5, gate_ms=0.25), timed, warmup_s=1.0, Ts=0.1)
+    assert f2["controllers_s_per_sim_s"] == pytest.approx(3.5 / 100)
+    assert f2["tm_s_per_sim_s"] == pytest.approx(1.5 / 100)
+    assert f2["other_s_per_sim_s"] == pytest.approx(f["other_s_per_sim_s"])
+    assert f2["controller_us_per_vehicle_step"] == pytest.approx(350.0)
+    assert f2["tm_ms_per_decision"] == 1.5 and f2["tm_gate_ms_per_decision"] == 0.25
+    assert f2["request_ms_per_decision"] == 0.5
     with pytest.raises(ValueError, match="rows"):
         b.window_figures(steps, timed.iloc[:-1], warmup_s=1.0, Ts=0.1)
     with pytest.raises(ValueError, match="window"):
