@@ -31,6 +31,7 @@ from controllers.plant import DISTURBANCES, step as plant_step
 from controllers.settings import ControllerSettings, SynthesisSettings
 from controllers.stmpc import STMPC
 from controllers.synthesis import synthesize
+from tm.claims import Claims
 from tm.manager import FleetState, TrafficManager
 from tm.monitor import Monitor
 from tm.settings import TMSettings
@@ -295,7 +296,15 @@ class Cosim:
         self.zone_hi = np.array([z.hi for z in self.zones], dtype=float).reshape(-1, 2) + radius
         self.zone_holder: list[str | None] = [None] * len(self.zones)
         self.zone_wait: dict[tuple[int, str], int] = {}
-        self._where: dict = {}  # vehicle id -> (group, row), refreshed by _gate
+        order = np.argsort(self.zone_lo[:, 0], kind="stable")  # guards by lower x, for _zone_pairs
+        self._zone_order = order
+        self._zone_x_sorted = self.zone_lo[order, 0]
+        self._zone_width_x = float((self.zone_hi[:, 0] - self.zone_lo[:, 0]).max()) if self.zones else 0.0
+        self._group_list: list = []  # non-empty groups in fleet order and their first rows, set by _gate
+        self._group_start = np.zeros(1, dtype=np.intp)
+        self._box_order = np.zeros(0, dtype=np.intp)  # current claim boxes by lower x, set by _gate
+        self._box_x0 = np.zeros(0)
+        self._box_width_x = 0.0
         self._exit_slot: dict = {}  # (vehicle, zone, waypoint) -> exit slot box or None
         self._ms_request = self._ms_gate = 0.0  # this step's request indices and junction tokens
 
@@ -341,23 +350,33 @@ class Cosim:
             self._ms_gate += (time.perf_counter() - tg) * 1e3
         return state
 
-    def _zone_hits(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-        """(V, Z) bool: claim boxes that meet zone guard boxes."""
-        zl, zh = self.zone_lo, self.zone_hi
-        hit = lo[:, 0, None] <= zh[None, :, 0]
-        hit &= hi[:, 0, None] >= zl[None, :, 0]
-        hit &= lo[:, 1, None] <= zh[None, :, 1]
-        hit &= hi[:, 1, None] >= zl[None, :, 1]
-        return hit
+    def _zone_pairs(self, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(i, z)``: every box ``i`` (``lo, hi`` of shape (n, 2)) that meets zone guard ``z``.
 
-    def _exit_free(self, vid: str, z: int, pos: dict, cur_lo: np.ndarray, cur_hi: np.ndarray) -> bool:
+        Guards sorted by their lower x: box ``i`` can only meet the guards whose lower x lies
+        in ``[lo_x - widest guard, hi_x]`` (a ``searchsorted`` range); those candidate pairs
+        are then tested on both axes.  Pairs sorted by ``i``.
+        """
+        zx = self._zone_x_sorted
+        start = np.searchsorted(zx, lo[:, 0] - self._zone_width_x, side="left")
+        count = np.maximum(np.searchsorted(zx, hi[:, 0], side="right") - start, 0)
+        i = np.repeat(np.arange(len(lo)), count)
+        q = np.repeat(start - np.cumsum(count) + count, count) + np.arange(int(count.sum()))
+        z = self._zone_order[q]
+        zl, zh = self.zone_lo, self.zone_hi
+        ok = (lo[i, 0] <= zh[z, 0]) & (hi[i, 0] >= zl[z, 0]) & (lo[i, 1] <= zh[z, 1]) & (hi[i, 1] >= zl[z, 1])
+        return i[ok], z[ok]
+
+    def _exit_free(self, vid: str, row: int, z: int, cur_lo: np.ndarray, cur_hi: np.ndarray) -> bool:
         """Whether the first waypoint of ``vid``'s route beyond zone ``z``'s guard is free.
 
-        The slot is the box around that waypoint that the vehicle's hold region would need
-        (its class's largest ``P^0`` extent plus its footprint's half diagonal); free means no
+        ``row`` is the vehicle's row in the fleet state (groups concatenated in order).  The
+        slot is the box around that waypoint that the vehicle's hold region would need (its
+        class's largest ``P^0`` extent plus its footprint's half diagonal); free means no
         other vehicle's current claim box meets it.
         """
-        g, j = self._where[vid]
+        gi = int(np.searchsorted(self._group_start, row, side="right")) - 1
+        g, j = self._group_list[gi], row - int(self._group_start[gi])
         k = int(g.k[j])
         key = (vid, z, k)
         if key not in self._exit_slot:  # depends on the route and the waypoint only
@@ -380,47 +399,72 @@ class Cosim:
         if slot is None:
             return True
         lo, hi = slot
-        hit = (cur_lo[:, 0] <= hi[0]) & (cur_hi[:, 0] >= lo[0]) & (cur_lo[:, 1] <= hi[1]) & (cur_hi[:, 1] >= lo[1])
-        hit[pos[vid]] = False
+        # boxes sorted by lower x (see _gate): only those with lower x in [lo_x - widest, hi_x] can meet
+        order, x0 = self._box_order, self._box_x0
+        a = int(np.searchsorted(x0, lo[0] - self._box_width_x, side="left"))
+        b = int(np.searchsorted(x0, hi[0], side="right"))
+        c = order[a:b]
+        hit = (cur_hi[c, 0] >= lo[0]) & (cur_lo[c, 1] <= hi[1]) & (cur_hi[c, 1] >= lo[1]) & (c != row)
         return not hit.any()
 
     def _gate(self, state: FleetState) -> FleetState:
         """Withhold requests into a zone guard whose token another vehicle holds (see :class:`Zone`)."""
-        cur_lo, cur_hi = self.tm.claims(state).aabb()
+        cur = self.tm.claims(state)
+        cur_lo, cur_hi = cur.aabb()
+        pos = dict(zip(state.ids, range(len(state.ids))))
         # release tokens whose holder's current claim has left the guard (or who is gone)
-        cur_hits = self._zone_hits(cur_lo, cur_hi)
-        pos = {v: i for i, v in enumerate(state.ids)}
-        for z, h in enumerate(self.zone_holder):
-            if h is not None and (h not in pos or not cur_hits[pos[h], z]):
+        held = [(z, pos.get(h, -1)) for z, h in enumerate(self.zone_holder) if h is not None]
+        if held:
+            hz, hi_ = np.array(held, dtype=np.intp).T
+            gone = hi_ < 0
+            inside = np.all(cur_lo[hi_] <= self.zone_hi[hz], axis=1) & np.all(cur_hi[hi_] >= self.zone_lo[hz], axis=1)
+            for z in hz[gone | ~inside].tolist():
                 self.zone_holder[z] = None
         req = state.requesting.copy()
-        if not req.any():
+        r = np.flatnonzero(req)
+        if not len(r):
             return state
-        new = FleetState(ids=state.ids, family=state.family, centre=state.req_centre, index=state.req_index,
-                         heading=state.req_heading, length=state.length, width=state.width)
-        new_lo, new_hi = self.tm.claims(new).aabb()
-        want = self._zone_hits(new_lo, new_hi) & ~cur_hits & req[:, None]
-        self._where = {v: (g, j) for g in self.groups.values() for j, v in enumerate(g.ids)}
+        new = Claims(cur.table, cur.family[r], state.req_centre[r], state.req_index[r], state.req_heading[r],
+                     cur.length[r], cur.width[r])
+        new_lo, new_hi = new.aabb()
+        # (requester, zone) pairs whose new claim reaches a guard its current claim is not in
+        ni, nz = self._zone_pairs(new_lo, new_hi)
+        ci, cz = self._zone_pairs(cur_lo[r], cur_hi[r])
+        Z = len(self.zones)
+        fresh = ~np.isin(ni * Z + nz, ci * Z + cz)
+        want = np.sort(nz[fresh] * len(r) + ni[fresh])             # grouped by zone, rows ascending
+        wz, wrow = want // len(r), r[want % len(r)]
+        self._group_list = [g for g in self.groups.values() if g.ids]
+        self._group_start = np.cumsum([0] + [len(g.ids) for g in self._group_list[:-1]])
         if len(self._exit_slot) > 100_000:  # stale (vehicle, waypoint) keys: start over
             self._exit_slot.clear()
-        for z in map(int, np.nonzero(want.any(axis=0))[0]):
-            cand = [state.ids[i] for i in np.nonzero(want[:, z])[0]]
+        if len(wz):  # for _exit_free: current claim boxes by lower x
+            self._box_order = np.argsort(cur_lo[:, 0], kind="stable")
+            self._box_x0 = cur_lo[self._box_order, 0]
+            self._box_width_x = float((cur_hi[:, 0] - cur_lo[:, 0]).max())
+        bounds = np.flatnonzero(np.diff(wz)) + 1
+        starts, ends = (np.r_[0, bounds], np.r_[bounds, len(wz)]) if len(wz) else (bounds, bounds)
+        holder_row = np.full(Z, -1, dtype=np.intp)
+        ids, wait, t = state.ids, self.zone_wait, self.t
+        for z, a, b in zip(wz[starts].tolist(), starts.tolist(), ends.tolist()):
+            rows = wrow[a:b].tolist()
+            cand = [ids[i] for i in rows]
             for v in cand:
-                self.zone_wait.setdefault((z, v), self.t)
+                wait.setdefault((z, v), t)
             holder = self.zone_holder[z]
-            if holder is None and cand:
+            if holder is None:
                 # first come, first served -- among those with room beyond the zone (do not
                 # block the box: a holder stuck in a queue inside the guard would stall everyone)
-                for v in sorted(cand, key=lambda v: (self.zone_wait[(z, v)], v)):
-                    if self._exit_free(v, z, pos, cur_lo, cur_hi):
+                for v, i in sorted(zip(cand, rows), key=lambda vi: (wait[(z, vi[0])], vi[0])):
+                    if self._exit_free(v, i, z, cur_lo, cur_hi):
                         holder = v
                         self.zone_holder[z] = v
                         break
-            for v in cand:
-                if v != holder:
-                    req[pos[v]] = False
-        for key in [k for k in self.zone_wait if k[1] not in pos or self.zone_holder[k[0]] == k[1]]:
-            self.zone_wait.pop(key, None)
+            if holder is not None:
+                holder_row[z] = pos.get(holder, -1)
+        req[wrow[holder_row[wz] != wrow]] = False   # only a zone's holder may ask into its guard
+        for key in [k for k in wait if k[1] not in pos or self.zone_holder[k[0]] == k[1]]:
+            wait.pop(key, None)
         return FleetState(ids=state.ids, family=state.family, centre=state.centre, index=state.index,
                           heading=state.heading, length=state.length, width=state.width, requesting=req,
                           req_centre=state.req_centre, req_index=state.req_index, req_heading=state.req_heading)

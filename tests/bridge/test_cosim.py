@@ -102,6 +102,31 @@ def test_zone_token_prevents_gridlock_at_a_crossing():
     assert runs["with"]["collisions_geometric"] == runs["without"]["collisions_geometric"] == 0
 
 
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), n_zones=st.integers(1, 30), n_boxes=st.integers(0, 60))
+def test_zone_pairs_are_exactly_the_boxes_that_meet_guards(seed, n_zones, n_boxes):
+    """The sorted-sweep zone lookup of the junction gate returns the same (box, guard) pairs
+    as testing every box against every guard (touching counts as meeting in both)."""
+    from bridge.cosim import Zone
+
+    rng = np.random.default_rng(seed)
+    corner = rng.uniform(0, 200, (n_zones, 2))
+    zones = [Zone(f"z{k}", tuple(c), tuple(c + rng.uniform(1, 40, 2))) for k, c in enumerate(corner)]
+    spec = VehicleSpec(id="v", vclass="paper-a", waypoints=np.array([[0.0, 0.0], [1.0, 0.0]]))
+    sim = Cosim(CLASSES, [spec], CosimSettings(), zones=zones)
+    lo = rng.uniform(-20, 220, (n_boxes, 2))
+    hi = lo + rng.uniform(0, 30, (n_boxes, 2))
+    if n_boxes:  # a box exactly touching a guard's edge
+        lo[0, 0] = sim.zone_hi[0, 0]
+        hi[0, 0] = lo[0, 0] + 5.0
+        lo[0, 1], hi[0, 1] = sim.zone_lo[0, 1], sim.zone_hi[0, 1]
+    i, z = sim._zone_pairs(lo, hi)
+    zl, zh = sim.zone_lo, sim.zone_hi
+    dense = np.all((lo[:, None, :] <= zh[None]) & (hi[:, None, :] >= zl[None]), axis=2)
+    assert sorted(zip(i.tolist(), z.tolist())) == sorted(zip(*map(list, np.nonzero(dense))))
+    assert list(i) == sorted(i)
+
+
 def test_invalid_waypoints_named():
     spec = VehicleSpec(id="bad", vclass="paper-c", waypoints=np.array([[0.0, 0.0], [50.0, 0.0]]))
     with pytest.raises(ValueError, match="vehicle bad: waypoints 0 and 1 are 50.000 m apart"):
