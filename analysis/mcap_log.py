@@ -190,6 +190,25 @@ def _class_templates(c: str, vc) -> tuple[str, str]:
     return vehicle, entity
 
 
+_DECISION = '{"t_s":%s,"requests":[%s],"granted":[%s],"denied":[%s],"forced":[%s],"edges":[%s],"tm_ms":%s}'
+_EDGE = '{"from":%s,"to":%s,"kind":%s}'
+
+
+def _float_text(v: float) -> str:
+    """``json.dumps`` of one float."""
+    return _REPR(v) if math.isfinite(v) else _j(v)
+
+
+def _edges_text(idt: list[str], edges: np.ndarray, kinds) -> str:
+    """The ``/tm/decision`` edge objects, comma-joined: ``idt`` is the JSON text of each id."""
+    if not len(edges):
+        return ""
+    names, inv = np.unique(np.asarray(kinds).reshape(-1), return_inverse=True)
+    text = [_j(str(k)) for k in names]
+    a, b = edges.T.tolist()
+    return _fill(_EDGE, len(a), [idt[i] for i in a], [idt[i] for i in b], [text[i] for i in inv.tolist()])
+
+
 def _fill(template: str, n: int, *columns) -> str:
     """``n`` copies of ``template`` joined by commas, slot ``i`` of copy ``j`` filled with ``columns[i][j]``."""
     if n == 0:
@@ -346,13 +365,15 @@ class McapLogger:
             go = np.asarray(decision.go, dtype=bool)
             forced = np.asarray(decision.forced, dtype=bool)
             edges = np.asarray(decision.edges, dtype=int).reshape(-1, 2)
-            kinds = [str(k) for k in np.asarray(decision.edge_kinds).reshape(-1)]
-            self._put("/tm/decision", ns, _j({
-                "t_s": float(row["t_s"]), "requests": list(compress(ids, req.tolist())),
-                "granted": list(compress(ids, go.tolist())), "denied": list(decision.stopped),
-                "forced": list(compress(ids, forced.tolist())),
-                "edges": [{"from": ids[u], "to": ids[v], "kind": k} for (u, v), k in zip(edges.tolist(), kinds)],
-                "tm_ms": float(row.get("tm_ms", 0.0))}))
+            idt = self._id_text.get(ids, lambda rows: [json.dumps(ids[j]) for j in rows])
+            denied = list(decision.stopped)
+            where = dict(zip(ids, idt)) if denied else {}
+            self._put("/tm/decision", ns, _DECISION % (
+                _float_text(float(row["t_s"])), ",".join(compress(idt, req.tolist())),
+                ",".join(compress(idt, go.tolist())),
+                ",".join([where[v] if v in where else _j(v) for v in denied]),
+                ",".join(compress(idt, forced.tolist())), _edges_text(idt, edges, decision.edge_kinds),
+                _float_text(float(row.get("tm_ms", 0.0)))))
             if self.level == "full":
                 self._put("/scene/claims", ns, self._claims_scene(stamp, clear, ids, req, go, edges, decision, state))
         elif self.level == "full":
