@@ -49,5 +49,11 @@ PROXSUITE_AGREEMENT_TOL = 2e-2
 #: Positive separation is required by the paper; 1e-9 m absorbs round-off.
 GEOMETRY_TOL = 1e-9
 
+#: Sorted sweeps over boxes take the candidates whose lower x lies in
+#: [lo_x - widest, hi_x]; ``lo_x - widest`` may round above the lower x of a box that
+#: exactly touches (hi - (hi - lo) > lo in floating point: found by hypothesis), so the
+#: range starts this much lower (m).  Candidates are then tested exactly.
+SWEEP_MARGIN = 1e-6
+
 #: Slack used when verifying invariance / one-step properties by LP.
 VERIFY_TOL = 1e-7

@@ -4,7 +4,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings, strategies as st
+from hypothesis import HealthCheck, example, given, settings, strategies as st
 
 from bridge.cosim import Cosim, CosimSettings, VehicleSpec
 from bridge.layouts import subsample
@@ -104,6 +104,7 @@ def test_zone_token_prevents_gridlock_at_a_crossing():
 
 @settings(max_examples=25, deadline=None)
 @given(seed=st.integers(0, 2**31 - 1), n_zones=st.integers(1, 30), n_boxes=st.integers(0, 60))
+@example(seed=186409337, n_zones=1, n_boxes=1)  # hi - (hi - lo) rounded above lo: missed before
 def test_zone_pairs_are_exactly_the_boxes_that_meet_guards(seed, n_zones, n_boxes):
     """The sorted-sweep zone lookup of the junction gate returns the same (box, guard) pairs
     as testing every box against every guard (touching counts as meeting in both)."""
@@ -125,6 +126,40 @@ def test_zone_pairs_are_exactly_the_boxes_that_meet_guards(seed, n_zones, n_boxe
     dense = np.all((lo[:, None, :] <= zh[None]) & (hi[:, None, :] >= zl[None]), axis=2)
     assert sorted(zip(i.tolist(), z.tolist())) == sorted(zip(*map(list, np.nonzero(dense))))
     assert list(i) == sorted(i)
+
+
+@pytest.mark.parametrize("gap_m, granted", [(-0.5, False), (0.5, True)])
+def test_junction_token_needs_room_for_the_claim_that_reaches_the_exit_slot(gap_m, granted):
+    """A vehicle gets a zone's token only if its route beyond the guard has room for the
+    largest claim it may hold around its exit slot (``P^{N-1}`` plus half the footprint along
+    the road), not only for its hold region there: else it stops one waypoint short of the
+    slot, its claim still in the guard, and keeps the token while it queues (gridlock on
+    SUMO grids).  A parked car ahead leaves 0.5 m less / more than that room."""
+    from bridge.cosim import Zone
+
+    cls = "car"
+    vc, fam = CLASSES[cls], None
+    W = subsample(np.array([[8.0, 0.0], [200.0, 0.0]]), vc.model.delta)  # its next claim reaches the guard
+    follower = VehicleSpec(id="F", vclass=cls, waypoints=W)
+    zone = Zone("J", (25.0, -5.0), (35.0, 5.0))
+    probe = Cosim(CLASSES, [follower], CosimSettings(disturbance="none"), zones=[zone])
+    fam = probe.families[cls]
+    guard_hi = probe.zone_hi[0, 0]
+    P0 = np.abs(fam.position_sets[0]).max()
+    r0 = P0 + 0.5 * np.hypot(vc.length, vc.width)
+    slot = W[np.argmax(W[:, 0] - r0 > guard_hi), 0]
+    room = np.abs(fam.position_sets[-2][:, 0]).max() + vc.length / 2
+    # the parked leader's claim (P^0 plus its footprint) starts gap_m beyond that room
+    x_leader = slot + room + gap_m + np.abs(fam.position_sets[0][:, 0]).max() + vc.length / 2
+    assert x_leader - P0 - vc.length / 2 - (slot + r0) > 1.0  # the old test (hold region) is met
+    leader = VehicleSpec(id="L", vclass=cls, waypoints=subsample(np.array([[x_leader, 0.0], [300.0, 0.0]]),
+                                                                  vc.model.delta))
+    sim = Cosim(CLASSES, [follower, leader], CosimSettings(disturbance="none"), zones=[zone])
+    sim._admit(0.0)
+    assert sorted(sim.records[v].admitted_s for v in "FL") == [0.0, 0.0]
+    state = sim._fleet(with_requests=True)
+    assert sim.zone_holder[0] == ("F" if granted else None)
+    assert bool(state.requesting[state.ids.index("F")]) == granted
 
 
 def test_invalid_waypoints_named():
