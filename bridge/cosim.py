@@ -60,12 +60,20 @@ class Zone:
 
     Liveness rule (the paper's traffic manager has none): a vehicle may only
     *ask* for a switch whose new claim reaches the zone's guard region (the
-    box enlarged by the largest claim radius of any class) while it holds the
-    zone's token; the token is free or held by one vehicle, handed out in
-    order of waiting, and released once the holder's claim has left the guard.
-    Non-holders therefore never claim inside the guard, so the holder always
-    crosses the zone's core: no gridlock inside a zone.  Safety is untouched:
-    the traffic manager still checks every request.
+    box enlarged by the largest claim radius of any class) while it holds one
+    of the zone's tokens.  A vehicle's corridor is the union of boxes that hold
+    every claim it can make from its current waypoint to its exit slot, the
+    first waypoint where its hold region is clear of the guard.  Tokens are
+    handed out in order of waiting to vehicles that have room for their
+    largest claim at the exit slot and whose corridor misses every holder's
+    corridor and every claim already in the guard; the first waiting vehicle
+    whose corridor meets a holder's ends the round, so nobody overtakes it.  A
+    token is released once the holder's claim has left the guard, and no
+    vehicle is admitted into a holder's corridor.  Holders therefore never
+    meet each other or a queue inside the guard: several cross at once when
+    their paths are apart (opposite straight streams, right turns), and none
+    stops inside the zone.  Safety is untouched: the traffic manager still
+    checks every request.
     """
 
     name: str
@@ -215,6 +223,11 @@ class _Group:
         return row[:, :2], row[:, 2], self.k + offset < self.K
 
 
+def _boxes_meet(lo1: np.ndarray, hi1: np.ndarray, lo2: np.ndarray, hi2: np.ndarray) -> bool:
+    """Whether any box ``(lo1[i], hi1[i])`` meets any box ``(lo2[j], hi2[j])`` (touching counts)."""
+    return bool(np.any(np.all((lo1[:, None, :] <= hi2[None]) & (hi1[:, None, :] >= lo2[None]), axis=2)))
+
+
 def _headings(W: np.ndarray) -> np.ndarray:
     """Heading of the segment arriving at each waypoint (the first takes the first segment's)."""
     d = np.diff(W, axis=0)
@@ -295,7 +308,9 @@ class Cosim:
         self.zones = list(zones or [])
         self.zone_lo = np.array([z.lo for z in self.zones], dtype=float).reshape(-1, 2) - radius
         self.zone_hi = np.array([z.hi for z in self.zones], dtype=float).reshape(-1, 2) + radius
-        self.zone_holder: list[str | None] = [None] * len(self.zones)
+        # per zone: holder id -> its corridor boxes (lo, hi) through the guard, granted at once
+        # only while the corridors are disjoint
+        self.zone_holders: list[dict[str, tuple[np.ndarray, np.ndarray]]] = [{} for _ in self.zones]
         self.zone_wait: dict[tuple[int, str], int] = {}
         order = np.argsort(self.zone_lo[:, 0], kind="stable")  # guards by lower x, for _zone_pairs
         self._zone_order = order
@@ -368,6 +383,55 @@ class Cosim:
         ok = (lo[i, 0] <= zh[z, 0]) & (hi[i, 0] >= zl[z, 0]) & (lo[i, 1] <= zh[z, 1]) & (hi[i, 1] >= zl[z, 1])
         return i[ok], z[ok]
 
+    def _claim_half_extent(self, vclass: VehicleClass, level: int, heading: np.ndarray) -> np.ndarray:
+        """Half extents (x, y) of the bounding box of the largest claim ``P^level ⊕ footprint``
+        of ``vclass`` at each heading (shape (n, 2)): the position set turns with the heading
+        in the road frame, only the footprint in the world frame."""
+        P = np.abs(self.families[vclass.name].position_sets[level]).max(axis=0)
+        half = 0.5 * np.array([vclass.length, vclass.width])
+        c, s = np.abs(np.cos(heading))[:, None], np.abs(np.sin(heading))[:, None]
+        if vclass.model.frame == "road":
+            e = P + half
+            return np.hstack([c * e[0] + s * e[1], s * e[0] + c * e[1]])
+        return P + np.hstack([c * half[0] + s * half[1], s * half[0] + c * half[1]])
+
+    def _route_through(self, vid: str, row: int, z: int):
+        """Exit slot and corridor of ``vid`` (fleet row ``row``) through zone ``z``'s guard.
+
+        Cached per (vehicle, zone, current waypoint): they depend on the route only.  The
+        exit slot is the box that must be free beyond the guard (see :meth:`_exit_free`), or
+        None when the route ends inside the guard or does not cross it.  The corridor is the
+        union of boxes ``(lo[i], hi[i])`` that hold every claim the vehicle can make from its
+        current waypoint up to the slot (each waypoint's box of ``P^{N-1}`` plus the
+        footprint at the waypoint's heading; claims are ``P^{l-1}``, ``l <= N``, nested).
+        """
+        gi = int(np.searchsorted(self._group_start, row, side="right")) - 1
+        g, j = self._group_list[gi], row - int(self._group_start[gi])
+        k = int(g.k[j])
+        key = (vid, z, k)
+        hit = self._exit_slot.get(key)
+        if hit is not None:
+            return hit
+        W, H = g.W[j], g.H[j]
+        r0 = float(np.abs(self.families[g.vclass.name].position_sets[0]).max()) \
+            + 0.5 * float(np.hypot(g.vclass.length, g.vclass.width))
+        lo_z, hi_z = self.zone_lo[z], self.zone_hi[z]
+        Wk = W[k + 1:]
+        inside = (Wk[:, 0] - r0 <= hi_z[0]) & (Wk[:, 0] + r0 >= lo_z[0]) & \
+            (Wk[:, 1] - r0 <= hi_z[1]) & (Wk[:, 1] + r0 >= lo_z[1])
+        last, exits = min(k + 1, len(W) - 1), False
+        if inside.any():  # else the route does not cross the guard beyond here
+            first_in = int(np.argmax(inside))
+            out = np.nonzero(~inside[first_in:])[0]
+            exits = len(out) > 0  # else the route ends inside the guard: it arrives there
+            last = k + 1 + first_in + int(out[0]) if exits else len(W) - 1
+        idx = np.arange(k, last + 1)
+        r1 = self._claim_half_extent(g.vclass, len(self.families[g.vclass.name].position_sets) - 2, H[idx])
+        corr_lo, corr_hi = W[idx] - r1, W[idx] + r1
+        slot = (corr_lo[-1], corr_hi[-1]) if exits else None
+        self._exit_slot[key] = found = (slot, corr_lo, corr_hi)
+        return found
+
     def _exit_free(self, vid: str, row: int, z: int, cur_lo: np.ndarray, cur_hi: np.ndarray) -> bool:
         """Whether the first waypoint of ``vid``'s route beyond zone ``z``'s guard is free.
 
@@ -383,31 +447,7 @@ class Cosim:
         waited for the next junction; on ``grid``, 600 s, seed 1 that gridlocked the
         network with 46 of 150 vehicles arrived, against 90 with this box.)
         """
-        gi = int(np.searchsorted(self._group_start, row, side="right")) - 1
-        g, j = self._group_list[gi], row - int(self._group_start[gi])
-        k = int(g.k[j])
-        key = (vid, z, k)
-        if key not in self._exit_slot:  # depends on the route and the waypoint only
-            W = g.W[j]
-            r0 = float(np.abs(self.families[g.vclass.name].position_sets[0]).max()) \
-                + 0.5 * float(np.hypot(g.vclass.length, g.vclass.width))
-            lo_z, hi_z = self.zone_lo[z], self.zone_hi[z]
-            Wk = W[k + 1:]
-            inside = (Wk[:, 0] - r0 <= hi_z[0]) & (Wk[:, 0] + r0 >= lo_z[0]) & \
-                (Wk[:, 1] - r0 <= hi_z[1]) & (Wk[:, 1] + r0 >= lo_z[1])
-            slot = None
-            if inside.any():  # else the route does not cross the guard beyond here
-                first_in = int(np.argmax(inside))
-                out = np.nonzero(~inside[first_in:])[0]
-                if len(out):  # else the route ends inside the guard: it arrives there
-                    e = k + 1 + first_in + int(out[0])
-                    ext = np.abs(self.families[g.vclass.name].position_sets[-2]).max(axis=0) \
-                        + 0.5 * np.array([g.vclass.length, g.vclass.width])
-                    c_, s_ = abs(np.cos(g.H[j][e])), abs(np.sin(g.H[j][e]))
-                    r1 = np.array([c_ * ext[0] + s_ * ext[1], s_ * ext[0] + c_ * ext[1]])
-                    slot = (W[e] - r1, W[e] + r1)
-            self._exit_slot[key] = slot
-        slot = self._exit_slot[key]
+        slot = self._route_through(vid, row, z)[0]
         if slot is None:
             return True
         lo, hi = slot
@@ -425,13 +465,14 @@ class Cosim:
         cur_lo, cur_hi = cur.aabb()
         pos = dict(zip(state.ids, range(len(state.ids))))
         # release tokens whose holder's current claim has left the guard (or who is gone)
-        held = [(z, pos.get(h, -1)) for z, h in enumerate(self.zone_holder) if h is not None]
+        held = [(z, pos.get(h, -1), h) for z, hs in enumerate(self.zone_holders) for h in hs]
         if held:
-            hz, hi_ = np.array(held, dtype=np.intp).T
+            hz = np.array([z for z, _, _ in held], dtype=np.intp)
+            hi_ = np.array([i for _, i, _ in held], dtype=np.intp)
             gone = hi_ < 0
             inside = np.all(cur_lo[hi_] <= self.zone_hi[hz], axis=1) & np.all(cur_hi[hi_] >= self.zone_lo[hz], axis=1)
-            for z in hz[gone | ~inside].tolist():
-                self.zone_holder[z] = None
+            for n in np.flatnonzero(gone | ~inside).tolist():
+                del self.zone_holders[held[n][0]][held[n][2]]
         req = state.requesting.copy()
         r = np.flatnonzero(req)
         if not len(r):
@@ -456,26 +497,37 @@ class Cosim:
             self._box_width_x = float((cur_hi[:, 0] - cur_lo[:, 0]).max())
         bounds = np.flatnonzero(np.diff(wz)) + 1
         starts, ends = (np.r_[0, bounds], np.r_[bounds, len(wz)]) if len(wz) else (bounds, bounds)
-        holder_row = np.full(Z, -1, dtype=np.intp)
         ids, wait, t = state.ids, self.zone_wait, self.t
+        allowed = np.zeros(len(wz), dtype=bool)
+        if len(wz):  # vehicles whose current claims are in a guard: holders, or not ("intruders")
+            gi_, gz_ = self._zone_pairs(cur_lo, cur_hi)
+            in_guard = np.sort(gz_ * len(ids) + gi_)
         for z, a, b in zip(wz[starts].tolist(), starts.tolist(), ends.tolist()):
             rows = wrow[a:b].tolist()
             cand = [ids[i] for i in rows]
             for v in cand:
                 wait.setdefault((z, v), t)
-            holder = self.zone_holder[z]
-            if holder is None:
-                # first come, first served -- among those with room beyond the zone (do not
-                # block the box: a holder stuck in a queue inside the guard would stall everyone)
-                for v, i in sorted(zip(cand, rows), key=lambda vi: (wait[(z, vi[0])], vi[0])):
-                    if self._exit_free(v, i, z, cur_lo, cur_hi):
-                        holder = v
-                        self.zone_holder[z] = v
-                        break
-            if holder is not None:
-                holder_row[z] = pos.get(holder, -1)
-        req[wrow[holder_row[wz] != wrow]] = False   # only a zone's holder may ask into its guard
-        for key in [k for k in wait if k[1] not in pos or self.zone_holder[k[0]] == k[1]]:
+            holders = self.zone_holders[z]
+            # In order of waiting: a candidate with room beyond the zone (do not block the box:
+            # a holder stuck in a queue inside the guard would stall everyone) gets a token if
+            # its corridor misses every holder's, so holders never meet inside the guard.  The
+            # first candidate whose corridor meets a holder's stops the round (nobody overtakes
+            # it into the zone, so it is served once those holders have left).
+            for v, i in sorted(zip(cand, rows), key=lambda vi: (wait[(z, vi[0])], vi[0])):
+                if v in holders or not self._exit_free(v, i, z, cur_lo, cur_hi):
+                    continue
+                _, c_lo, c_hi = self._route_through(v, i, z)
+                if any(_boxes_meet(c_lo, c_hi, h_lo, h_hi) for h_lo, h_hi in holders.values()):
+                    break
+                # nor a vehicle already in the guard without a token (admitted there) in the way
+                a_, b_ = np.searchsorted(in_guard, [z * len(ids), (z + 1) * len(ids)])
+                intr = [w for w in (in_guard[a_:b_] - z * len(ids)).tolist() if w != i and ids[w] not in holders]
+                if intr and _boxes_meet(c_lo, c_hi, cur_lo[intr], cur_hi[intr]):
+                    continue
+                holders[v] = (c_lo, c_hi)
+            allowed[a:b] = [ids[i] in holders for i in rows]
+        req[wrow[~allowed]] = False   # only a zone's holders may ask into its guard
+        for key in [k for k in wait if k[1] not in pos or k[1] in self.zone_holders[k[0]]]:
             wait.pop(key, None)
         return FleetState(ids=state.ids, family=state.family, centre=state.centre, index=state.index,
                           heading=state.heading, length=state.length, width=state.width, requesting=req,
@@ -613,6 +665,16 @@ class Cosim:
                              index=np.minimum(cur.index + 1, top), heading=cur.heading, length=cur.length,
                              width=cur.width)
         ok = self.tm.admit(cur, cand)
+        held = [c for hs in self.zone_holders for c in hs.values()]
+        if held and ok.any():  # nor into a junction holder's corridor (see _gate)
+            ok = np.asarray(ok, dtype=bool).copy()
+            for q in np.flatnonzero(ok):
+                sp = ready[q]
+                vc = self.classes[sp.vclass]
+                r = self._claim_half_extent(vc, len(self.families[sp.vclass].position_sets) - 2,
+                                            cand.heading[q:q + 1])
+                lo, hi = cand.centre[q:q + 1] - r, cand.centre[q:q + 1] + r
+                ok[q] = not any(_boxes_meet(lo, hi, h_lo, h_hi) for h_lo, h_hi in held)
         n = 0
         for sp, a in zip(ready, ok):
             if not a:

@@ -46,8 +46,11 @@ __all__ = [
     "LANE_CHANGE_M",
 ]
 
-#: Longitudinal length of a lane change, per lane crossed (m).
-LANE_CHANGE_M = 15.0
+#: Longitudinal length of a lane change, per lane crossed (m).  With 15 m (12 degrees
+#: across a 3.2 m lane) a 12 m bus's turned footprint reached 1.2 m further across, into
+#: the claims of the opposite lane, and met an oncoming car head-on: each one's next claim
+#: met the other's hold region, for good (measured on ``grid``, 600 s).
+LANE_CHANGE_M = 30.0
 
 _DUP_TOL = 1e-9  # consecutive polyline points closer than this are merged (m)
 
