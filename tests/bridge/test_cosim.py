@@ -162,6 +162,61 @@ def test_junction_token_needs_room_for_the_claim_that_reaches_the_exit_slot(gap_
     assert bool(state.requesting[state.ids.index("F")]) == granted
 
 
+def _through_zone(vid, start, end, cls="car", depart_s=0.0):
+    W = subsample(np.array([start, end], dtype=float), CLASSES[cls].model.delta)
+    return VehicleSpec(id=vid, vclass=cls, waypoints=W, depart_s=depart_s)
+
+
+# A 10 m junction at the origin; lanes 3.2 m apart.  Each vehicle starts where its next claim
+# reaches the guard (the zone enlarged by the largest claim radius) but its current one does not.
+_JUNCTION = dict(lo=(-5.0, -5.0), hi=(5.0, 5.0))
+_EAST = ("A", (-22.0, -1.6), (60.0, -1.6))
+_WEST = ("B", (22.0, 1.6), (-60.0, 1.6))
+_NORTH = ("C", (1.6, -22.0), (1.6, 60.0))
+
+
+def _gate_once(paths, pending=()):
+    from bridge.cosim import Zone
+
+    specs = [_through_zone(*p) for p in paths]
+    sim = Cosim(CLASSES, specs, CosimSettings(disturbance="none"), zones=[Zone("J", **_JUNCTION)])
+    sim._admit(0.0)
+    assert all(sim.records[s.id].admitted_s == 0.0 for s in specs)
+    state = sim._fleet(with_requests=True)
+    asked = {v for v, q in zip(state.ids, state.requesting) if q}
+    return sim, set(sim.zone_holders[0]), asked
+
+
+def test_junction_tokens_go_to_every_waiting_vehicle_whose_corridor_is_apart():
+    """Opposite straight streams cross a junction together; a crossing one waits (and, waiting
+    longest among those behind it, is not overtaken)."""
+    _, holders, asked = _gate_once([_EAST, _WEST])
+    assert holders == asked == {"A", "B"}
+    _, holders, asked = _gate_once([_EAST, _NORTH])
+    assert holders == asked == {"A"}
+    _, holders, asked = _gate_once([_EAST, _NORTH, _WEST])  # A, B, C in order: C is apart from A
+    assert holders == asked == {"A", "B"}
+    # equal waits go in id order: the north one ("B" now) is blocked by A and ends the round,
+    # so the west one ("C"), though apart from A, does not overtake it
+    _, holders, asked = _gate_once([_EAST, ("B",) + _NORTH[1:], ("C",) + _WEST[1:]])
+    assert holders == asked == {"A"}
+
+
+def test_no_token_through_a_claim_already_in_the_guard_and_no_admission_into_a_corridor():
+    # a vehicle admitted inside the guard (no token needed to appear) sits in A's way
+    _, holders, asked = _gate_once([_EAST, ("E", (-3.0, -1.6), (60.0, -1.6))])
+    assert "A" not in holders and "A" not in asked
+    # A holds the token: a vehicle departing inside its corridor waits, one elsewhere does not
+    sim, holders, _ = _gate_once([_EAST])
+    assert holders == {"A"}
+    for vid, start, end, admitted in (("D", (10.0, -1.6), (60.0, -1.6), False),
+                                      ("F", (10.0, 30.0), (60.0, 30.0), True)):
+        spec = _through_zone(vid, start, end)
+        sim.pending.append(spec)
+        sim.records[vid] = type(sim.records["A"])(vid, "car", 0.0, spec.route_length_m)
+        assert sim._admit(0.0) == int(admitted), vid
+
+
 def test_invalid_waypoints_named():
     spec = VehicleSpec(id="bad", vclass="paper-c", waypoints=np.array([[0.0, 0.0], [50.0, 0.0]]))
     with pytest.raises(ValueError, match="vehicle bad: waypoints 0 and 1 are 50.000 m apart"):
