@@ -223,6 +223,80 @@ class _Group:
         return row[:, :2], row[:, 2], self.k + offset < self.K
 
 
+def _cells(lo: np.ndarray, hi: np.ndarray, cell: float):
+    """Every (box, grid cell) pair of boxes no wider than ``cell``: at most 2 x 2 cells a box."""
+    c0 = np.floor(lo / cell).astype(np.int64)
+    c1 = np.floor(hi / cell).astype(np.int64)
+    box, key = [], []
+    for dx in (0, 1):
+        for dy in (0, 1):
+            ok = (c0[:, 0] + dx <= c1[:, 0]) & (c0[:, 1] + dy <= c1[:, 1])
+            box.append(np.flatnonzero(ok))
+            key.append((c0[ok, 0] + dx) * (1 << 32) + (c0[ok, 1] + dy))
+    return np.concatenate(box), np.concatenate(key)
+
+
+class _BoxGrid:
+    """Boxes ``(lo[j], hi[j])`` bucketed on a uniform grid of square cells no smaller than the
+    widest box (so a box covers at most 2 x 2 cells), for :meth:`pairs`."""
+
+    def __init__(self, lo: np.ndarray, hi: np.ndarray, cell: float):
+        self.lo, self.hi, self.cell = lo, hi, cell
+        box, key = _cells(lo, hi, cell)
+        order = np.argsort(key, kind="stable")
+        self.key, self.box = key[order], box[order]
+
+    def pairs(self, q_lo: np.ndarray, q_hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(i, j)``: every query box ``i`` (no wider than the cell) that meets box ``j``
+        (touching counts), each pair once.  Boxes sharing a cell are tested exactly on both
+        axes; a pair is kept in one cell only, the one holding the larger of the two lower
+        corners.  (A sweep along x alone met every vehicle of the same north-south road.)"""
+        if not len(q_lo) or not len(self.lo):
+            return np.zeros(0, dtype=np.intp), np.zeros(0, dtype=np.intp)
+        qb, qk = _cells(q_lo, q_hi, self.cell)
+        start = np.searchsorted(self.key, qk, side="left")
+        count = np.searchsorted(self.key, qk, side="right") - start
+        i = np.repeat(qb, count)
+        k = np.repeat(qk, count)
+        j = self.box[np.repeat(start - np.cumsum(count) + count, count) + np.arange(int(count.sum()))]
+        lo, hi = self.lo, self.hi
+        ok = (hi[j, 0] >= q_lo[i, 0]) & (lo[j, 0] <= q_hi[i, 0]) & (lo[j, 1] <= q_hi[i, 1]) & (hi[j, 1] >= q_lo[i, 1])
+        i, j, k = i[ok], j[ok], k[ok]
+        ref = np.floor(np.maximum(q_lo[i], lo[j]) / self.cell).astype(np.int64)
+        once = ref[:, 0] * (1 << 32) + ref[:, 1] == k
+        return i[once], j[once]
+
+
+def _corridor_hits(zone_q, row_q, first, c_lo, c_hi, zone_b, row_b, b_lo, b_hi) -> np.ndarray:
+    """Per query ``q``: whether one of its corridor boxes ``first[q]:first[q + 1]`` meets a box
+    ``row_b[k]`` of its own zone (``zone_b`` ascending), other than its own row ``row_q[q]``.
+
+    Candidates and the boxes of their zone are paired by ``searchsorted`` on the zone, then
+    each pair's corridor boxes are tested against its box (touching counts)."""
+    hits = np.zeros(len(zone_q), dtype=bool)
+    if not len(zone_b) or not len(zone_q):
+        return hits
+    s = np.searchsorted(zone_b, zone_q, side="left")
+    cnt = np.searchsorted(zone_b, zone_q, side="right") - s
+    q = np.repeat(np.arange(len(zone_q)), cnt)
+    k = np.repeat(s - np.cumsum(cnt) + cnt, cnt) + np.arange(int(cnt.sum()))
+    j = row_b[k]
+    # the corridor's bounding box first: most pairs of a zone are far apart
+    cb_lo = np.minimum.reduceat(c_lo, first[:-1], axis=0)
+    cb_hi = np.maximum.reduceat(c_hi, first[:-1], axis=0)
+    near = (j != row_q[q]) & np.all((cb_lo[q] <= b_hi[j]) & (cb_hi[q] >= b_lo[j]), axis=1)
+    q, j = q[near], j[near]
+    if not len(q):
+        return hits
+    n_box = first[q + 1] - first[q]
+    qq = np.repeat(q, n_box)
+    jj = np.repeat(j, n_box)
+    bb = np.repeat(first[q] - np.cumsum(n_box) + n_box, n_box) + np.arange(int(n_box.sum()))
+    meet = np.all((c_lo[bb] <= b_hi[jj]) & (c_hi[bb] >= b_lo[jj]), axis=1)
+    hits[qq[meet]] = True
+    return hits
+
+
 def _boxes_meet(lo1: np.ndarray, hi1: np.ndarray, lo2: np.ndarray, hi2: np.ndarray) -> bool:
     """Whether any box ``(lo1[i], hi1[i])`` meets any box ``(lo2[j], hi2[j])`` (touching counts)."""
     return bool(np.any(np.all((lo1[:, None, :] <= hi2[None]) & (hi1[:, None, :] >= lo2[None]), axis=2)))
@@ -308,9 +382,10 @@ class Cosim:
         self.zones = list(zones or [])
         self.zone_lo = np.array([z.lo for z in self.zones], dtype=float).reshape(-1, 2) - radius
         self.zone_hi = np.array([z.hi for z in self.zones], dtype=float).reshape(-1, 2) + radius
-        # per zone: holder id -> its corridor boxes (lo, hi) through the guard, granted at once
-        # only while the corridors are disjoint
-        self.zone_holders: list[dict[str, tuple[np.ndarray, np.ndarray]]] = [{} for _ in self.zones]
+        # per zone: holder id -> (its route key, its corridor boxes lo, hi) through the guard;
+        # tokens go to several vehicles at once only while their corridors are disjoint
+        self.zone_holders: list[dict[str, tuple]] = [{} for _ in self.zones]
+        self._meet: dict = {}  # (route key, route key) -> whether the two corridors meet
         self.zone_wait: dict[tuple[int, str], int] = {}
         order = np.argsort(self.zone_lo[:, 0], kind="stable")  # guards by lower x, for _zone_pairs
         self._zone_order = order
@@ -318,10 +393,7 @@ class Cosim:
         self._zone_width_x = float((self.zone_hi[:, 0] - self.zone_lo[:, 0]).max()) if self.zones else 0.0
         self._group_list: list = []  # non-empty groups in fleet order and their first rows, set by _gate
         self._group_start = np.zeros(1, dtype=np.intp)
-        self._box_order = np.zeros(0, dtype=np.intp)  # current claim boxes by lower x, set by _gate
-        self._box_x0 = np.zeros(0)
-        self._box_width_x = 0.0
-        self._exit_slot: dict = {}  # (vehicle, zone, waypoint) -> exit slot box or None
+        self._exit_slot: dict = {}  # (vehicle, zone, waypoint) -> (exit slot box or None, corridor lo, hi)
         self._ms_request = self._ms_gate = 0.0  # this step's request indices and junction tokens
 
     # -------------------------------------------------------------- state
@@ -396,22 +468,33 @@ class Cosim:
         return P + np.hstack([c * half[0] + s * half[1], s * half[0] + c * half[1]])
 
     def _route_through(self, vid: str, row: int, z: int):
-        """Exit slot and corridor of ``vid`` (fleet row ``row``) through zone ``z``'s guard.
+        """``(key, slot, lo, hi)``: the exit slot and corridor of ``vid`` (fleet row ``row``)
+        through zone ``z``'s guard, and their cache key ``(vid, z, current waypoint)``.
 
         Cached per (vehicle, zone, current waypoint): they depend on the route only.  The
-        exit slot is the box that must be free beyond the guard (see :meth:`_exit_free`), or
+        exit slot is the box that must be free beyond the guard (see below), or
         None when the route ends inside the guard or does not cross it.  The corridor is the
         union of boxes ``(lo[i], hi[i])`` that hold every claim the vehicle can make from its
         current waypoint up to the slot (each waypoint's box of ``P^{N-1}`` plus the
         footprint at the waypoint's heading; claims are ``P^{l-1}``, ``l <= N``, nested).
+
+        The slot waypoint is the first one whose hold-region box (the class's largest ``P^0``
+        extent plus its footprint's half diagonal) misses the guard: a holder at rest there
+        has left the guard and releases the token.  The slot box is the corridor's last box:
+        room for the largest claim the holder may need around that waypoint on its way there.
+        (Room for the hold region alone is not enough: the symmetric sets claim as much road
+        ahead of the waypoint as behind it, so a holder got stuck one waypoint short of the
+        slot, its claim still in the guard, behind a queue that waited for the next junction;
+        on ``grid``, 600 s, seed 1 that gridlocked the network with 46 of 150 vehicles
+        arrived, against 90 with this box and one token per junction.)
         """
         gi = int(np.searchsorted(self._group_start, row, side="right")) - 1
         g, j = self._group_list[gi], row - int(self._group_start[gi])
         k = int(g.k[j])
         key = (vid, z, k)
-        hit = self._exit_slot.get(key)
-        if hit is not None:
-            return hit
+        found = self._exit_slot.get(key)
+        if found is not None:
+            return found
         W, H = g.W[j], g.H[j]
         r0 = float(np.abs(self.families[g.vclass.name].position_sets[0]).max()) \
             + 0.5 * float(np.hypot(g.vclass.length, g.vclass.width))
@@ -429,35 +512,18 @@ class Cosim:
         r1 = self._claim_half_extent(g.vclass, len(self.families[g.vclass.name].position_sets) - 2, H[idx])
         corr_lo, corr_hi = W[idx] - r1, W[idx] + r1
         slot = (corr_lo[-1], corr_hi[-1]) if exits else None
-        self._exit_slot[key] = found = (slot, corr_lo, corr_hi)
+        self._exit_slot[key] = found = (key, slot, corr_lo, corr_hi)
         return found
 
-    def _exit_free(self, vid: str, row: int, z: int, cur_lo: np.ndarray, cur_hi: np.ndarray) -> bool:
-        """Whether the first waypoint of ``vid``'s route beyond zone ``z``'s guard is free.
-
-        ``row`` is the vehicle's row in the fleet state (groups concatenated in order).  The
-        slot waypoint is the first one whose hold-region box (the class's largest ``P^0``
-        extent plus its footprint's half diagonal) misses the guard: a holder at rest there
-        has left the guard and releases the token.  Free means no other vehicle's current
-        claim box meets the box that the holder's claim may need around that waypoint on its
-        way there, ``P^{N-1}`` plus half the footprint, along and across the road at the
-        waypoint's heading.  (Room for the hold region alone is not enough: the symmetric
-        sets claim as much road ahead of the waypoint as behind it, so a holder got stuck
-        one waypoint short of the slot, its claim still in the guard, behind a queue that
-        waited for the next junction; on ``grid``, 600 s, seed 1 that gridlocked the
-        network with 46 of 150 vehicles arrived, against 90 with this box.)
-        """
-        slot = self._route_through(vid, row, z)[0]
-        if slot is None:
-            return True
-        lo, hi = slot
-        # boxes sorted by lower x (see _gate): only those with lower x in [lo_x - widest, hi_x] can meet
-        order, x0 = self._box_order, self._box_x0
-        a = int(np.searchsorted(x0, lo[0] - self._box_width_x - SWEEP_MARGIN, side="left"))
-        b = int(np.searchsorted(x0, hi[0], side="right"))
-        c = order[a:b]
-        hit = (cur_hi[c, 0] >= lo[0]) & (cur_lo[c, 1] <= hi[1]) & (cur_hi[c, 1] >= lo[1]) & (c != row)
-        return not hit.any()
+    def _corridors_meet(self, key_a, lo_a, hi_a, key_b, lo_b, hi_b) -> bool:
+        """Whether two corridors meet (cached per pair of route keys: they are fixed)."""
+        pair = (key_a, key_b)
+        hit = self._meet.get(pair)
+        if hit is None:
+            if len(self._meet) > 200_000:  # stale keys: start over
+                self._meet.clear()
+            hit = self._meet[pair] = _boxes_meet(lo_a, hi_a, lo_b, hi_b)
+        return hit
 
     def _gate(self, state: FleetState) -> FleetState:
         """Withhold requests into a zone guard whose token another vehicle holds (see :class:`Zone`)."""
@@ -491,41 +557,64 @@ class Cosim:
         self._group_start = np.cumsum([0] + [len(g.ids) for g in self._group_list[:-1]])
         if len(self._exit_slot) > 100_000:  # stale (vehicle, waypoint) keys: start over
             self._exit_slot.clear()
-        if len(wz):  # for _exit_free: current claim boxes by lower x
-            self._box_order = np.argsort(cur_lo[:, 0], kind="stable")
-            self._box_x0 = cur_lo[self._box_order, 0]
-            self._box_width_x = float((cur_hi[:, 0] - cur_lo[:, 0]).max())
-        bounds = np.flatnonzero(np.diff(wz)) + 1
-        starts, ends = (np.r_[0, bounds], np.r_[bounds, len(wz)]) if len(wz) else (bounds, bounds)
-        ids, wait, t = state.ids, self.zone_wait, self.t
-        allowed = np.zeros(len(wz), dtype=bool)
-        if len(wz):  # vehicles whose current claims are in a guard: holders, or not ("intruders")
+        ids, wait, t, n = state.ids, self.zone_wait, self.t, len(state.ids)
+        holder_keys = np.array(sorted(z * n + pos[h] for z, hs in enumerate(self.zone_holders) for h in hs),
+                               dtype=np.intp)
+        is_holder = np.isin(wz * n + wrow, holder_keys)
+        allowed = is_holder.copy()
+        P = np.flatnonzero(~is_holder)  # (zone, candidate) pairs that need a token
+        if len(P):
+            routes = [self._route_through(ids[i], i, z) for z, i in zip(wz[P].tolist(), wrow[P].tolist())]
+            c_len = np.array([len(rt[2]) for rt in routes])
+            c_lo = np.vstack([rt[2] for rt in routes])
+            c_hi = np.vstack([rt[3] for rt in routes])
+            cell = max(float((cur_hi - cur_lo).max()), float((c_hi - c_lo).max())) + SWEEP_MARGIN
+            claims_grid = _BoxGrid(cur_lo, cur_hi, cell)
+            # room for the largest claim at the exit slot (the corridor's last box): no other
+            # vehicle's current claim there
+            has_slot = np.array([rt[1] is not None for rt in routes])
+            blocked_exit = np.zeros(len(P), dtype=bool)
+            if has_slot.any():
+                qs = np.flatnonzero(has_slot)
+                s_lo = np.array([routes[q][1][0] for q in qs])
+                s_hi = np.array([routes[q][1][1] for q in qs])
+                qi, bj = claims_grid.pairs(s_lo, s_hi)
+                other = bj != wrow[P[qs[qi]]]
+                blocked_exit[qs[qi[other]]] = True
+            first = np.r_[0, np.cumsum(c_len)]
+            zP = wz[P]
+            # claims already in the guard that are not a holder's ("intruders"), by zone
             gi_, gz_ = self._zone_pairs(cur_lo, cur_hi)
-            in_guard = np.sort(gz_ * len(ids) + gi_)
-        for z, a, b in zip(wz[starts].tolist(), starts.tolist(), ends.tolist()):
-            rows = wrow[a:b].tolist()
-            cand = [ids[i] for i in rows]
-            for v in cand:
-                wait.setdefault((z, v), t)
-            holders = self.zone_holders[z]
-            # In order of waiting: a candidate with room beyond the zone (do not block the box:
-            # a holder stuck in a queue inside the guard would stall everyone) gets a token if
-            # its corridor misses every holder's, so holders never meet inside the guard.  The
-            # first candidate whose corridor meets a holder's stops the round (nobody overtakes
-            # it into the zone, so it is served once those holders have left).
-            for v, i in sorted(zip(cand, rows), key=lambda vi: (wait[(z, vi[0])], vi[0])):
-                if v in holders or not self._exit_free(v, i, z, cur_lo, cur_hi):
+            keep = ~np.isin(gz_ * n + gi_, holder_keys)
+            o = np.argsort(gz_[keep], kind="stable")
+            blocked_intr = _corridor_hits(zP, wrow[P], first, c_lo, c_hi,
+                                          gz_[keep][o], gi_[keep][o], cur_lo, cur_hi)
+            # In order of waiting, per zone: a candidate with room beyond the zone (do not block
+            # the box: a holder stuck in a queue inside the guard would stall everyone) gets a
+            # token if its corridor misses every holder's, so holders never meet inside the
+            # guard, and misses the claims already in the guard.  The first candidate whose
+            # corridor meets a holder's ends the round (nobody overtakes it into the zone, so it
+            # is served once those holders have left).
+            cid = [ids[i] for i in wrow[P].tolist()]
+            since = np.array([wait.setdefault((z, v), t) for z, v in zip(zP.tolist(), cid)])
+            # candidates with room, by zone, then by waiting, then by id (the others are skipped)
+            viable = np.flatnonzero(~blocked_exit)
+            order = viable[np.lexsort((np.array(cid, dtype=object)[viable].astype(str), since[viable], zP[viable]))]
+            z_prev, stop = -1, False
+            for q in order.tolist():
+                z = int(zP[q])
+                if z != z_prev:
+                    z_prev, stop, holders = z, False, self.zone_holders[z]
+                if stop:
                     continue
-                _, c_lo, c_hi = self._route_through(v, i, z)
-                if any(_boxes_meet(c_lo, c_hi, h_lo, h_hi) for h_lo, h_hi in holders.values()):
-                    break
-                # nor a vehicle already in the guard without a token (admitted there) in the way
-                a_, b_ = np.searchsorted(in_guard, [z * len(ids), (z + 1) * len(ids)])
-                intr = [w for w in (in_guard[a_:b_] - z * len(ids)).tolist() if w != i and ids[w] not in holders]
-                if intr and _boxes_meet(c_lo, c_hi, cur_lo[intr], cur_hi[intr]):
+                key_q, _, lo_q, hi_q = routes[q]
+                if any(self._corridors_meet(key_q, lo_q, hi_q, *h) for h in holders.values()):
+                    stop = True
                     continue
-                holders[v] = (c_lo, c_hi)
-            allowed[a:b] = [ids[i] in holders for i in rows]
+                if blocked_intr[q]:
+                    continue
+                holders[cid[q]] = (key_q, lo_q, hi_q)
+                allowed[P[q]] = True
         req[wrow[~allowed]] = False   # only a zone's holders may ask into its guard
         for key in [k for k in wait if k[1] not in pos or k[1] in self.zone_holders[k[0]]]:
             wait.pop(key, None)
@@ -666,15 +755,18 @@ class Cosim:
                              width=cur.width)
         ok = self.tm.admit(cur, cand)
         held = [c for hs in self.zone_holders for c in hs.values()]
+        ok = np.asarray(ok, dtype=bool)
         if held and ok.any():  # nor into a junction holder's corridor (see _gate)
-            ok = np.asarray(ok, dtype=bool).copy()
-            for q in np.flatnonzero(ok):
-                sp = ready[q]
-                vc = self.classes[sp.vclass]
-                r = self._claim_half_extent(vc, len(self.families[sp.vclass].position_sets) - 2,
-                                            cand.heading[q:q + 1])
-                lo, hi = cand.centre[q:q + 1] - r, cand.centre[q:q + 1] + r
-                ok[q] = not any(_boxes_meet(lo, hi, h_lo, h_hi) for h_lo, h_hi in held)
+            h_lo = np.vstack([c[1] for c in held])
+            h_hi = np.vstack([c[2] for c in held])
+            q = np.flatnonzero(ok)
+            r = np.vstack([self._claim_half_extent(self.classes[ready[i].vclass],
+                                                   len(self.families[ready[i].vclass].position_sets) - 2,
+                                                   cand.heading[i:i + 1]) for i in q.tolist()])
+            lo, hi = cand.centre[q] - r, cand.centre[q] + r
+            meet = np.any(np.all((lo[:, None, :] <= h_hi[None]) & (hi[:, None, :] >= h_lo[None]), axis=2), axis=1)
+            ok = ok.copy()
+            ok[q[meet]] = False
         n = 0
         for sp, a in zip(ready, ok):
             if not a:

@@ -162,6 +162,25 @@ def test_junction_token_needs_room_for_the_claim_that_reaches_the_exit_slot(gap_
     assert bool(state.requesting[state.ids.index("F")]) == granted
 
 
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), n_q=st.integers(0, 40), n_b=st.integers(0, 80),
+       scale=st.sampled_from([1.0, 10.0, 100.0]))
+def test_box_pairs_are_exactly_the_meeting_pairs_once(seed, n_q, n_b, scale):
+    """The junction gate's grid join returns every (query, box) pair that meets, touching
+    included, exactly once: as testing every pair."""
+    from bridge.cosim import _BoxGrid
+
+    rng = np.random.default_rng(seed)
+    q_lo = np.round(rng.uniform(-2, 2, (n_q, 2)) * scale)  # rounded: shared edges and corners
+    q_hi = q_lo + np.round(rng.uniform(0, 1, (n_q, 2)) * scale)
+    b_lo = np.round(rng.uniform(-2, 2, (n_b, 2)) * scale)
+    b_hi = b_lo + np.round(rng.uniform(0, 1, (n_b, 2)) * scale)
+    widest = max([0.0] + [float((h - l).max()) for l, h in ((q_lo, q_hi), (b_lo, b_hi)) if len(l)])
+    i, j = _BoxGrid(b_lo, b_hi, widest + 1e-6).pairs(q_lo, q_hi)
+    dense = np.all((q_lo[:, None, :] <= b_hi[None]) & (q_hi[:, None, :] >= b_lo[None]), axis=2)
+    assert sorted(zip(i.tolist(), j.tolist())) == sorted(zip(*map(list, np.nonzero(dense))))
+
+
 def _through_zone(vid, start, end, cls="car", depart_s=0.0):
     W = subsample(np.array([start, end], dtype=float), CLASSES[cls].model.delta)
     return VehicleSpec(id=vid, vclass=cls, waypoints=W, depart_s=depart_s)
