@@ -30,6 +30,7 @@ from bridge.scenarios import _write_summary
 from bridge.sumo_adapter import SumoAdapter, SumoError
 from bridge.waypoints import RouteError, load_net, trim_start
 from controllers.classes import builtin_classes
+from controllers.tolerances import HOLD_TOL_M, HOLD_TOL_RAD
 from tm.settings import TMSettings
 
 #: Gap between a departing vehicle's back and the start of its first lane (m).
@@ -41,6 +42,9 @@ SUMOCFG_DEFAULTS = {"tm": "optimal", "check": "union", "switching": "early", "di
 __all__ = ["SumoWorld", "junction_zones", "run_sumo"]
 
 
+_NEVER = (1e18, 1e18, 0.0)  # pose of a vehicle not yet sent: far from any, so always moved
+
+
 class SumoWorld:
     """The :class:`~bridge.cosim.World` adapter over a started :class:`SumoAdapter`."""
 
@@ -50,6 +54,8 @@ class SumoWorld:
         self.routes = routes
         self.lengths: dict[str, float] = {}
         self.step_ms = 0.0
+        self._sent: dict[str, list] = {}  # vehicle -> (x, y, heading) last sent by moveToXY
+        self._held: set[str] = set()      # vehicles SUMO holds at speed 0 (see push)
 
     def insert(self, spec: VehicleSpec, vclass) -> None:
         pv, r = self.planned[spec.id], self.routes[spec.id]
@@ -60,10 +66,32 @@ class SumoWorld:
                            depart_lane=r.depart_lane_index)
 
     def push(self, ids, centre, heading) -> None:
-        lengths = np.array([self.lengths[v] for v in ids])
-        self.adapter.move(ids, front_bumper(centre, heading, lengths), sumo_angle(heading))
+        """Move the vehicles whose pose changed (beyond :data:`HOLD_TOL_M` /
+        :data:`HOLD_TOL_RAD` since it was last sent); hold the others still in SUMO."""
+        c = np.asarray(centre, dtype=float).reshape(-1, 2)
+        h = np.asarray(heading, dtype=float).reshape(-1)
+        last = np.array([self._sent.get(v, _NEVER) for v in ids], dtype=float).reshape(-1, 3)
+        still = (np.hypot(c[:, 0] - last[:, 0], c[:, 1] - last[:, 1]) < HOLD_TOL_M) & \
+            (np.abs(np.angle(np.exp(1j * (h - last[:, 2])))) < HOLD_TOL_RAD)
+        hold = [v for v, s in zip(ids, still.tolist()) if s and v not in self._held]
+        if hold:
+            self.adapter.hold(hold)
+            self._held.update(hold)
+        mv = np.flatnonzero(~still)
+        if not len(mv):
+            return
+        mids = [ids[i] for i in mv.tolist()]
+        release = [v for v in mids if v in self._held]
+        if release:
+            self.adapter.release(release)
+            self._held.difference_update(release)
+        lengths = np.array([self.lengths[v] for v in mids])
+        self.adapter.move(mids, front_bumper(c[mv], h[mv], lengths), sumo_angle(h[mv]))
+        self._sent.update(zip(mids, np.column_stack([c[mv], h[mv]]).tolist()))
 
     def finish(self, vid: str) -> None:
+        self._sent.pop(vid, None)
+        self._held.discard(vid)
         self.adapter.finish(vid)
 
     def step(self) -> list:

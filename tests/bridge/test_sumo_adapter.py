@@ -284,3 +284,75 @@ def test_sumo_dying_mid_run_is_a_sumo_error_and_close_survives(grid_cfg):
         sim.close()
         sim.close()
     assert not sim.running
+
+
+def _admitted_on_a_straight(sim, net, demand, delta=1.0, steps=5):
+    """A vehicle admitted and driven ``steps`` waypoints along its first (straight) edge."""
+    v = demand.vehicles[0]
+    r = net.route(v.edges, delta, vehicle_id=v.id, vclass=v.vclass)
+    xy, ang = pose_at(r, 0, v.length)
+    sim.admit(v, xy, ang, depart_lane=r.depart_lane_index)
+    sim.step()
+    for k in range(1, steps + 1):
+        xy, ang = pose_at(r, k, v.length)
+        sim.move([v.id], xy[None], [ang])
+        sim.step()
+    return v, r
+
+
+@pytest.mark.parametrize("held", [True, False])
+def test_a_held_vehicle_stays_put_without_moves_and_follows_moves_after_release(grid_cfg, grid_net, held):
+    """Without a moveToXY SUMO drives the vehicle itself; held (speed 0) it stays exactly where
+    it was put, and after release it follows moves again at the speed they imply."""
+    net = load_net(grid_net)
+    with SumoAdapter() as sim:
+        demand = sim.start(grid_cfg, seed=1)
+        v, r = _admitted_on_a_straight(sim, net, demand)
+        before, _ = sim.pose([v.id])
+        if held:
+            sim.hold([v.id])
+        for _ in range(20):
+            sim.step()
+        after, _ = sim.pose([v.id])
+        drift = float(np.hypot(*(after[0] - before[0])))
+        if not held:
+            assert drift > 0.5  # SUMO drove it on its own: holding is needed
+            return
+        assert drift == 0.0 and sim.speeds([v.id])[0] == 0.0
+        sim.release([v.id])
+        xy, ang = pose_at(r, 7, v.length)  # two waypoints (2 m) ahead of where it was held
+        sim.move([v.id], xy[None], [ang])
+        sim.step()
+        got, _ = sim.pose([v.id])
+        np.testing.assert_allclose(got[0], xy, atol=1e-6)
+        assert sim.speeds([v.id])[0] > 0.0
+        assert sim.collisions() == []
+
+
+def test_world_push_moves_only_vehicles_that_moved_beyond_the_hold_tolerance(grid_cfg, grid_net):
+    from bridge.sumo_world import SumoWorld
+    from controllers.tolerances import HOLD_TOL_M
+
+    net = load_net(grid_net)
+    with SumoAdapter() as sim:
+        demand = sim.start(grid_cfg, seed=1)
+        v, r = _admitted_on_a_straight(sim, net, demand)
+        world = SumoWorld(sim, {}, {})
+        world.lengths[v.id] = v.length
+        c, h = np.array(r.waypoints[5], dtype=float), float(r.heading[5])
+        world.push([v.id], c[None], [h])        # first push: sent
+        sim.step()
+        sent, _ = sim.pose([v.id])
+        u = np.array([np.cos(h), np.sin(h)])
+        world.push([v.id], (c + 0.5 * HOLD_TOL_M * u)[None], [h])  # within tolerance: held
+        for _ in range(10):
+            sim.step()
+        held, _ = sim.pose([v.id])
+        assert float(np.hypot(*(held[0] - sent[0]))) == 0.0 and sim.speeds([v.id])[0] == 0.0
+        world.push([v.id], (c + 2.0 * u)[None], [h])  # beyond: moved (and released)
+        sim.step()
+        moved, _ = sim.pose([v.id])
+        assert float(np.hypot(*(moved[0] - sent[0]))) == pytest.approx(2.0, abs=1e-6)
+        world.finish(v.id)
+        sim.step()
+        assert sim.arrived_ids() == (v.id,)
