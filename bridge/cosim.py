@@ -31,8 +31,8 @@ from controllers.plant import DISTURBANCES, step as plant_step
 from controllers.settings import ControllerSettings, SynthesisSettings
 from controllers.stmpc import STMPC
 from controllers.synthesis import synthesize
-from controllers.tolerances import SWEEP_MARGIN
 from tm.claims import Claims
+from tm.junctions import ClassReach, JunctionFleet, JunctionGate, Zone
 from tm.manager import FleetState, TrafficManager
 from tm.monitor import Monitor
 from tm.settings import TMSettings
@@ -52,33 +52,6 @@ class VehicleSpec:
     @property
     def route_length_m(self) -> float:
         return float(np.linalg.norm(np.diff(self.waypoints, axis=0), axis=1).sum())
-
-
-@dataclass(frozen=True)
-class Zone:
-    """A conflict zone (e.g. a junction) as an axis-aligned box ``lo <= p <= hi`` (m).
-
-    Liveness rule (the paper's traffic manager has none): a vehicle may only
-    *ask* for a switch whose new claim reaches the zone's guard region (the
-    box enlarged by the largest claim radius of any class) while it holds one
-    of the zone's tokens.  A vehicle's corridor is the union of boxes that hold
-    every claim it can make from its current waypoint to its exit slot, the
-    first waypoint where its hold region is clear of the guard.  Tokens are
-    handed out in order of waiting to vehicles that have room for their
-    largest claim at the exit slot and whose corridor misses every holder's
-    corridor and every claim already in the guard; the first waiting vehicle
-    whose corridor meets a holder's ends the round, so nobody overtakes it.  A
-    token is released once the holder's claim has left the guard, and no
-    vehicle is admitted into a holder's corridor.  Holders therefore never
-    meet each other or a queue inside the guard: several cross at once when
-    their paths are apart (opposite straight streams, right turns), and none
-    stops inside the zone.  Safety is untouched: the traffic manager still
-    checks every request.
-    """
-
-    name: str
-    lo: tuple
-    hi: tuple
 
 
 @dataclass(frozen=True)
@@ -223,85 +196,6 @@ class _Group:
         return row[:, :2], row[:, 2], self.k + offset < self.K
 
 
-def _cells(lo: np.ndarray, hi: np.ndarray, cell: float):
-    """Every (box, grid cell) pair of boxes no wider than ``cell``: at most 2 x 2 cells a box."""
-    c0 = np.floor(lo / cell).astype(np.int64)
-    c1 = np.floor(hi / cell).astype(np.int64)
-    box, key = [], []
-    for dx in (0, 1):
-        for dy in (0, 1):
-            ok = (c0[:, 0] + dx <= c1[:, 0]) & (c0[:, 1] + dy <= c1[:, 1])
-            box.append(np.flatnonzero(ok))
-            key.append((c0[ok, 0] + dx) * (1 << 32) + (c0[ok, 1] + dy))
-    return np.concatenate(box), np.concatenate(key)
-
-
-class _BoxGrid:
-    """Boxes ``(lo[j], hi[j])`` bucketed on a uniform grid of square cells no smaller than the
-    widest box (so a box covers at most 2 x 2 cells), for :meth:`pairs`."""
-
-    def __init__(self, lo: np.ndarray, hi: np.ndarray, cell: float):
-        self.lo, self.hi, self.cell = lo, hi, cell
-        box, key = _cells(lo, hi, cell)
-        order = np.argsort(key, kind="stable")
-        self.key, self.box = key[order], box[order]
-
-    def pairs(self, q_lo: np.ndarray, q_hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``(i, j)``: every query box ``i`` (no wider than the cell) that meets box ``j``
-        (touching counts), each pair once.  Boxes sharing a cell are tested exactly on both
-        axes; a pair is kept in one cell only, the one holding the larger of the two lower
-        corners.  (A sweep along x alone met every vehicle of the same north-south road.)"""
-        if not len(q_lo) or not len(self.lo):
-            return np.zeros(0, dtype=np.intp), np.zeros(0, dtype=np.intp)
-        qb, qk = _cells(q_lo, q_hi, self.cell)
-        start = np.searchsorted(self.key, qk, side="left")
-        count = np.searchsorted(self.key, qk, side="right") - start
-        i = np.repeat(qb, count)
-        k = np.repeat(qk, count)
-        j = self.box[np.repeat(start - np.cumsum(count) + count, count) + np.arange(int(count.sum()))]
-        lo, hi = self.lo, self.hi
-        ok = (hi[j, 0] >= q_lo[i, 0]) & (lo[j, 0] <= q_hi[i, 0]) & (lo[j, 1] <= q_hi[i, 1]) & (hi[j, 1] >= q_lo[i, 1])
-        i, j, k = i[ok], j[ok], k[ok]
-        ref = np.floor(np.maximum(q_lo[i], lo[j]) / self.cell).astype(np.int64)
-        once = ref[:, 0] * (1 << 32) + ref[:, 1] == k
-        return i[once], j[once]
-
-
-def _corridor_hits(zone_q, row_q, first, c_lo, c_hi, zone_b, row_b, b_lo, b_hi) -> np.ndarray:
-    """Per query ``q``: whether one of its corridor boxes ``first[q]:first[q + 1]`` meets a box
-    ``row_b[k]`` of its own zone (``zone_b`` ascending), other than its own row ``row_q[q]``.
-
-    Candidates and the boxes of their zone are paired by ``searchsorted`` on the zone, then
-    each pair's corridor boxes are tested against its box (touching counts)."""
-    hits = np.zeros(len(zone_q), dtype=bool)
-    if not len(zone_b) or not len(zone_q):
-        return hits
-    s = np.searchsorted(zone_b, zone_q, side="left")
-    cnt = np.searchsorted(zone_b, zone_q, side="right") - s
-    q = np.repeat(np.arange(len(zone_q)), cnt)
-    k = np.repeat(s - np.cumsum(cnt) + cnt, cnt) + np.arange(int(cnt.sum()))
-    j = row_b[k]
-    # the corridor's bounding box first: most pairs of a zone are far apart
-    cb_lo = np.minimum.reduceat(c_lo, first[:-1], axis=0)
-    cb_hi = np.maximum.reduceat(c_hi, first[:-1], axis=0)
-    near = (j != row_q[q]) & np.all((cb_lo[q] <= b_hi[j]) & (cb_hi[q] >= b_lo[j]), axis=1)
-    q, j = q[near], j[near]
-    if not len(q):
-        return hits
-    n_box = first[q + 1] - first[q]
-    qq = np.repeat(q, n_box)
-    jj = np.repeat(j, n_box)
-    bb = np.repeat(first[q] - np.cumsum(n_box) + n_box, n_box) + np.arange(int(n_box.sum()))
-    meet = np.all((c_lo[bb] <= b_hi[jj]) & (c_hi[bb] >= b_lo[jj]), axis=1)
-    hits[qq[meet]] = True
-    return hits
-
-
-def _boxes_meet(lo1: np.ndarray, hi1: np.ndarray, lo2: np.ndarray, hi2: np.ndarray) -> bool:
-    """Whether any box ``(lo1[i], hi1[i])`` meets any box ``(lo2[j], hi2[j])`` (touching counts)."""
-    return bool(np.any(np.all((lo1[:, None, :] <= hi2[None]) & (hi1[:, None, :] >= lo2[None]), axis=2)))
-
-
 def _headings(W: np.ndarray) -> np.ndarray:
     """Heading of the segment arriving at each waypoint (the first takes the first segment's)."""
     d = np.diff(W, axis=0)
@@ -375,25 +269,11 @@ class Cosim:
         self.constraint_violations = 0
         self.collisions_world: set = set()
         self.last_decision = None
-        # zones: guard boxes (core enlarged by the largest claim radius), token holders, queues
-        radius = max(float(np.abs(f.position_sets[-1]).max()) + 0.5 * np.hypot(self.classes[c].length,
-                                                                              self.classes[c].width)
-                     for c, f in self.families.items()) if self.families else 0.0
+        # zones: guards, tokens, corridors and queues (the liveness layer, tm.junctions)
         self.zones = list(zones or [])
-        self.zone_lo = np.array([z.lo for z in self.zones], dtype=float).reshape(-1, 2) - radius
-        self.zone_hi = np.array([z.hi for z in self.zones], dtype=float).reshape(-1, 2) + radius
-        # per zone: holder id -> (its route key, its corridor boxes lo, hi) through the guard;
-        # tokens go to several vehicles at once only while their corridors are disjoint
-        self.zone_holders: list[dict[str, tuple]] = [{} for _ in self.zones]
-        self._meet: dict = {}  # (route key, route key) -> whether the two corridors meet
-        self.zone_wait: dict[tuple[int, str], int] = {}
-        order = np.argsort(self.zone_lo[:, 0], kind="stable")  # guards by lower x, for _zone_pairs
-        self._zone_order = order
-        self._zone_x_sorted = self.zone_lo[order, 0]
-        self._zone_width_x = float((self.zone_hi[:, 0] - self.zone_lo[:, 0]).max()) if self.zones else 0.0
-        self._group_list: list = []  # non-empty groups in fleet order and their first rows, set by _gate
-        self._group_start = np.zeros(1, dtype=np.intp)
-        self._exit_slot: dict = {}  # (vehicle, zone, waypoint) -> (exit slot box or None, corridor lo, hi)
+        self.junctions = JunctionGate(self.zones, {
+            c: ClassReach.of(f.position_sets, self.classes[c].length, self.classes[c].width,
+                             self.classes[c].model.frame == "road") for c, f in self.families.items()})
         self._ms_request = self._ms_gate = 0.0  # this step's request indices and junction tokens
 
     # -------------------------------------------------------------- state
@@ -438,186 +318,36 @@ class Cosim:
             self._ms_gate += (time.perf_counter() - tg) * 1e3
         return state
 
-    def _zone_pairs(self, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``(i, z)``: every box ``i`` (``lo, hi`` of shape (n, 2)) that meets zone guard ``z``.
+    @property
+    def zone_holders(self) -> list[dict[str, tuple]]:
+        """Per zone: its token holders (id -> route key, corridor boxes lo, hi)."""
+        return self.junctions.holders
 
-        Guards sorted by their lower x: box ``i`` can only meet the guards whose lower x lies
-        in ``[lo_x - widest guard, hi_x]`` (a ``searchsorted`` range); those candidate pairs
-        are then tested on both axes.  Pairs sorted by ``i``.
-        """
-        zx = self._zone_x_sorted
-        start = np.searchsorted(zx, lo[:, 0] - self._zone_width_x - SWEEP_MARGIN, side="left")
-        count = np.maximum(np.searchsorted(zx, hi[:, 0], side="right") - start, 0)
-        i = np.repeat(np.arange(len(lo)), count)
-        q = np.repeat(start - np.cumsum(count) + count, count) + np.arange(int(count.sum()))
-        z = self._zone_order[q]
-        zl, zh = self.zone_lo, self.zone_hi
-        ok = (lo[i, 0] <= zh[z, 0]) & (hi[i, 0] >= zl[z, 0]) & (lo[i, 1] <= zh[z, 1]) & (hi[i, 1] >= zl[z, 1])
-        return i[ok], z[ok]
+    @property
+    def zone_lo(self) -> np.ndarray:
+        """Lower corners of the zones' guards (the zones enlarged by the largest claim radius)."""
+        return self.junctions.lo
 
-    def _claim_half_extent(self, vclass: VehicleClass, level: int, heading: np.ndarray) -> np.ndarray:
-        """Half extents (x, y) of the bounding box of the largest claim ``P^level ⊕ footprint``
-        of ``vclass`` at each heading (shape (n, 2)): the position set turns with the heading
-        in the road frame, only the footprint in the world frame."""
-        P = np.abs(self.families[vclass.name].position_sets[level]).max(axis=0)
-        half = 0.5 * np.array([vclass.length, vclass.width])
-        c, s = np.abs(np.cos(heading))[:, None], np.abs(np.sin(heading))[:, None]
-        if vclass.model.frame == "road":
-            e = P + half
-            return np.hstack([c * e[0] + s * e[1], s * e[0] + c * e[1]])
-        return P + np.hstack([c * half[0] + s * half[1], s * half[0] + c * half[1]])
-
-    def _route_through(self, vid: str, row: int, z: int):
-        """``(key, slot, lo, hi)``: the exit slot and corridor of ``vid`` (fleet row ``row``)
-        through zone ``z``'s guard, and their cache key ``(vid, z, current waypoint)``.
-
-        Cached per (vehicle, zone, current waypoint): they depend on the route only.  The
-        exit slot is the box that must be free beyond the guard (see below), or
-        None when the route ends inside the guard or does not cross it.  The corridor is the
-        union of boxes ``(lo[i], hi[i])`` that hold every claim the vehicle can make from its
-        current waypoint up to the slot (each waypoint's box of ``P^{N-1}`` plus the
-        footprint at the waypoint's heading; claims are ``P^{l-1}``, ``l <= N``, nested).
-
-        The slot waypoint is the first one whose hold-region box (the class's largest ``P^0``
-        extent plus its footprint's half diagonal) misses the guard: a holder at rest there
-        has left the guard and releases the token.  The slot box is the corridor's last box:
-        room for the largest claim the holder may need around that waypoint on its way there.
-        (Room for the hold region alone is not enough: the symmetric sets claim as much road
-        ahead of the waypoint as behind it, so a holder got stuck one waypoint short of the
-        slot, its claim still in the guard, behind a queue that waited for the next junction;
-        on ``grid``, 600 s, seed 1 that gridlocked the network with 46 of 150 vehicles
-        arrived, against 90 with this box and one token per junction.)
-        """
-        gi = int(np.searchsorted(self._group_start, row, side="right")) - 1
-        g, j = self._group_list[gi], row - int(self._group_start[gi])
-        k = int(g.k[j])
-        key = (vid, z, k)
-        found = self._exit_slot.get(key)
-        if found is not None:
-            return found
-        W, H = g.W[j], g.H[j]
-        r0 = float(np.abs(self.families[g.vclass.name].position_sets[0]).max()) \
-            + 0.5 * float(np.hypot(g.vclass.length, g.vclass.width))
-        lo_z, hi_z = self.zone_lo[z], self.zone_hi[z]
-        Wk = W[k + 1:]
-        inside = (Wk[:, 0] - r0 <= hi_z[0]) & (Wk[:, 0] + r0 >= lo_z[0]) & \
-            (Wk[:, 1] - r0 <= hi_z[1]) & (Wk[:, 1] + r0 >= lo_z[1])
-        last, exits = min(k + 1, len(W) - 1), False
-        if inside.any():  # else the route does not cross the guard beyond here
-            first_in = int(np.argmax(inside))
-            out = np.nonzero(~inside[first_in:])[0]
-            exits = len(out) > 0  # else the route ends inside the guard: it arrives there
-            last = k + 1 + first_in + int(out[0]) if exits else len(W) - 1
-        idx = np.arange(k, last + 1)
-        r1 = self._claim_half_extent(g.vclass, len(self.families[g.vclass.name].position_sets) - 2, H[idx])
-        corr_lo, corr_hi = W[idx] - r1, W[idx] + r1
-        slot = (corr_lo[-1], corr_hi[-1]) if exits else None
-        self._exit_slot[key] = found = (key, slot, corr_lo, corr_hi)
-        return found
-
-    def _corridors_meet(self, key_a, lo_a, hi_a, key_b, lo_b, hi_b) -> bool:
-        """Whether two corridors meet (cached per pair of route keys: they are fixed)."""
-        pair = (key_a, key_b)
-        hit = self._meet.get(pair)
-        if hit is None:
-            if len(self._meet) > 200_000:  # stale keys: start over
-                self._meet.clear()
-            hit = self._meet[pair] = _boxes_meet(lo_a, hi_a, lo_b, hi_b)
-        return hit
+    @property
+    def zone_hi(self) -> np.ndarray:
+        """Upper corners of the zones' guards."""
+        return self.junctions.hi
 
     def _gate(self, state: FleetState) -> FleetState:
         """Withhold requests into a zone guard whose token another vehicle holds (see :class:`Zone`)."""
         cur = self.tm.claims(state)
         cur_lo, cur_hi = cur.aabb()
-        pos = dict(zip(state.ids, range(len(state.ids))))
-        # release tokens whose holder's current claim has left the guard (or who is gone)
-        held = [(z, pos.get(h, -1), h) for z, hs in enumerate(self.zone_holders) for h in hs]
-        if held:
-            hz = np.array([z for z, _, _ in held], dtype=np.intp)
-            hi_ = np.array([i for _, i, _ in held], dtype=np.intp)
-            gone = hi_ < 0
-            inside = np.all(cur_lo[hi_] <= self.zone_hi[hz], axis=1) & np.all(cur_hi[hi_] >= self.zone_lo[hz], axis=1)
-            for n in np.flatnonzero(gone | ~inside).tolist():
-                del self.zone_holders[held[n][0]][held[n][2]]
-        req = state.requesting.copy()
-        r = np.flatnonzero(req)
+        r = np.flatnonzero(state.requesting)
+        new_lo = new_hi = np.zeros((0, 2))
+        if len(r):
+            new = Claims(cur.table, cur.family[r], state.req_centre[r], state.req_index[r], state.req_heading[r],
+                         cur.length[r], cur.width[r])
+            new_lo, new_hi = new.aabb()
+        fleet = JunctionFleet(state.ids, state.family, cur_lo, cur_hi,
+                              tuple((g.W, g.H, g.k) for g in self.groups.values() if g.ids))
+        req = self.junctions.withhold(self.t, fleet, state.requesting, new_lo, new_hi)
         if not len(r):
             return state
-        new = Claims(cur.table, cur.family[r], state.req_centre[r], state.req_index[r], state.req_heading[r],
-                     cur.length[r], cur.width[r])
-        new_lo, new_hi = new.aabb()
-        # (requester, zone) pairs whose new claim reaches a guard its current claim is not in
-        ni, nz = self._zone_pairs(new_lo, new_hi)
-        ci, cz = self._zone_pairs(cur_lo[r], cur_hi[r])
-        Z = len(self.zones)
-        fresh = ~np.isin(ni * Z + nz, ci * Z + cz)
-        want = np.sort(nz[fresh] * len(r) + ni[fresh])             # grouped by zone, rows ascending
-        wz, wrow = want // len(r), r[want % len(r)]
-        self._group_list = [g for g in self.groups.values() if g.ids]
-        self._group_start = np.cumsum([0] + [len(g.ids) for g in self._group_list[:-1]])
-        if len(self._exit_slot) > 100_000:  # stale (vehicle, waypoint) keys: start over
-            self._exit_slot.clear()
-        ids, wait, t, n = state.ids, self.zone_wait, self.t, len(state.ids)
-        holder_keys = np.array(sorted(z * n + pos[h] for z, hs in enumerate(self.zone_holders) for h in hs),
-                               dtype=np.intp)
-        is_holder = np.isin(wz * n + wrow, holder_keys)
-        allowed = is_holder.copy()
-        P = np.flatnonzero(~is_holder)  # (zone, candidate) pairs that need a token
-        if len(P):
-            routes = [self._route_through(ids[i], i, z) for z, i in zip(wz[P].tolist(), wrow[P].tolist())]
-            c_len = np.array([len(rt[2]) for rt in routes])
-            c_lo = np.vstack([rt[2] for rt in routes])
-            c_hi = np.vstack([rt[3] for rt in routes])
-            cell = max(float((cur_hi - cur_lo).max()), float((c_hi - c_lo).max())) + SWEEP_MARGIN
-            claims_grid = _BoxGrid(cur_lo, cur_hi, cell)
-            # room for the largest claim at the exit slot (the corridor's last box): no other
-            # vehicle's current claim there
-            has_slot = np.array([rt[1] is not None for rt in routes])
-            blocked_exit = np.zeros(len(P), dtype=bool)
-            if has_slot.any():
-                qs = np.flatnonzero(has_slot)
-                s_lo = np.array([routes[q][1][0] for q in qs])
-                s_hi = np.array([routes[q][1][1] for q in qs])
-                qi, bj = claims_grid.pairs(s_lo, s_hi)
-                other = bj != wrow[P[qs[qi]]]
-                blocked_exit[qs[qi[other]]] = True
-            first = np.r_[0, np.cumsum(c_len)]
-            zP = wz[P]
-            # claims already in the guard that are not a holder's ("intruders"), by zone
-            gi_, gz_ = self._zone_pairs(cur_lo, cur_hi)
-            keep = ~np.isin(gz_ * n + gi_, holder_keys)
-            o = np.argsort(gz_[keep], kind="stable")
-            blocked_intr = _corridor_hits(zP, wrow[P], first, c_lo, c_hi,
-                                          gz_[keep][o], gi_[keep][o], cur_lo, cur_hi)
-            # In order of waiting, per zone: a candidate with room beyond the zone (do not block
-            # the box: a holder stuck in a queue inside the guard would stall everyone) gets a
-            # token if its corridor misses every holder's, so holders never meet inside the
-            # guard, and misses the claims already in the guard.  The first candidate whose
-            # corridor meets a holder's ends the round (nobody overtakes it into the zone, so it
-            # is served once those holders have left).
-            cid = [ids[i] for i in wrow[P].tolist()]
-            since = np.array([wait.setdefault((z, v), t) for z, v in zip(zP.tolist(), cid)])
-            # candidates with room, by zone, then by waiting, then by id (the others are skipped)
-            viable = np.flatnonzero(~blocked_exit)
-            order = viable[np.lexsort((np.array(cid, dtype=object)[viable].astype(str), since[viable], zP[viable]))]
-            z_prev, stop = -1, False
-            for q in order.tolist():
-                z = int(zP[q])
-                if z != z_prev:
-                    z_prev, stop, holders = z, False, self.zone_holders[z]
-                if stop:
-                    continue
-                key_q, _, lo_q, hi_q = routes[q]
-                if any(self._corridors_meet(key_q, lo_q, hi_q, *h) for h in holders.values()):
-                    stop = True
-                    continue
-                if blocked_intr[q]:
-                    continue
-                holders[cid[q]] = (key_q, lo_q, hi_q)
-                allowed[P[q]] = True
-        req[wrow[~allowed]] = False   # only a zone's holders may ask into its guard
-        for key in [k for k in wait if k[1] not in pos or k[1] in self.zone_holders[k[0]]]:
-            wait.pop(key, None)
         return FleetState(ids=state.ids, family=state.family, centre=state.centre, index=state.index,
                           heading=state.heading, length=state.length, width=state.width, requesting=req,
                           req_centre=state.req_centre, req_index=state.req_index, req_heading=state.req_heading)
@@ -754,19 +484,8 @@ class Cosim:
                              index=np.minimum(cur.index + 1, top), heading=cur.heading, length=cur.length,
                              width=cur.width)
         ok = self.tm.admit(cur, cand)
-        held = [c for hs in self.zone_holders for c in hs.values()]
-        ok = np.asarray(ok, dtype=bool)
-        if held and ok.any():  # nor into a junction holder's corridor (see _gate)
-            h_lo = np.vstack([c[1] for c in held])
-            h_hi = np.vstack([c[2] for c in held])
-            q = np.flatnonzero(ok)
-            r = np.vstack([self._claim_half_extent(self.classes[ready[i].vclass],
-                                                   len(self.families[ready[i].vclass].position_sets) - 2,
-                                                   cand.heading[i:i + 1]) for i in q.tolist()])
-            lo, hi = cand.centre[q] - r, cand.centre[q] + r
-            meet = np.any(np.all((lo[:, None, :] <= h_hi[None]) & (hi[:, None, :] >= h_lo[None]), axis=2), axis=1)
-            ok = ok.copy()
-            ok[q[meet]] = False
+        # nor into a junction token holder's corridor (tm.junctions)
+        ok = self.junctions.admissible(ok, cand.family, cand.centre, cand.heading)
         n = 0
         for sp, a in zip(ready, ok):
             if not a:

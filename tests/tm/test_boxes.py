@@ -1,0 +1,82 @@
+"""Box joins of the junction layer (tm.boxes) against testing every pair densely.
+
+Exact comparisons: every join tests the same ``<=`` / ``>=`` inequalities on the same floats
+as the dense reference (touching counts as meeting in both); coordinates are rounded so that
+shared edges and corners occur.
+"""
+
+import numpy as np
+from hypothesis import example, given, settings, strategies as st
+
+from tm.boxes import BoxGrid, GuardIndex, boxes_meet, corridor_hits
+
+
+def _dense(q_lo, q_hi, b_lo, b_hi):
+    return np.all((q_lo[:, None, :] <= b_hi[None]) & (q_hi[:, None, :] >= b_lo[None]), axis=2)
+
+
+def _pairs(m):
+    return sorted(zip(*map(list, np.nonzero(m))))
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), n_zones=st.integers(1, 30), n_boxes=st.integers(0, 60))
+@example(seed=186409337, n_zones=1, n_boxes=1)  # hi - (hi - lo) rounded above lo: missed before
+def test_guard_pairs_are_exactly_the_boxes_that_meet_guards(seed, n_zones, n_boxes):
+    """The sorted-sweep guard lookup returns the same (box, guard) pairs as testing every box
+    against every guard, sorted by box."""
+    rng = np.random.default_rng(seed)
+    g_lo = rng.uniform(0, 200, (n_zones, 2)) - 7.3   # guards: zones enlarged by a radius
+    g_hi = g_lo + rng.uniform(1, 40, (n_zones, 2)) + 2 * 7.3
+    guards = GuardIndex(g_lo, g_hi)
+    lo = rng.uniform(-20, 220, (n_boxes, 2))
+    hi = lo + rng.uniform(0, 30, (n_boxes, 2))
+    if n_boxes:  # a box exactly touching a guard's edge
+        lo[0, 0] = g_hi[0, 0]
+        hi[0, 0] = lo[0, 0] + 5.0
+        lo[0, 1], hi[0, 1] = g_lo[0, 1], g_hi[0, 1]
+    i, z = guards.pairs(lo, hi)
+    assert sorted(zip(i.tolist(), z.tolist())) == _pairs(_dense(lo, hi, g_lo, g_hi))
+    assert list(i) == sorted(i)
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), n_q=st.integers(0, 40), n_b=st.integers(0, 80),
+       scale=st.sampled_from([1.0, 10.0, 100.0]))
+def test_box_pairs_are_exactly_the_meeting_pairs_once(seed, n_q, n_b, scale):
+    """The grid join returns every (query, box) pair that meets, touching included, exactly
+    once: as testing every pair."""
+    rng = np.random.default_rng(seed)
+    q_lo = np.round(rng.uniform(-2, 2, (n_q, 2)) * scale)  # rounded: shared edges and corners
+    q_hi = q_lo + np.round(rng.uniform(0, 1, (n_q, 2)) * scale)
+    b_lo = np.round(rng.uniform(-2, 2, (n_b, 2)) * scale)
+    b_hi = b_lo + np.round(rng.uniform(0, 1, (n_b, 2)) * scale)
+    widest = max([0.0] + [float((h - l).max()) for l, h in ((q_lo, q_hi), (b_lo, b_hi)) if len(l)])
+    i, j = BoxGrid(b_lo, b_hi, widest + 1e-6).pairs(q_lo, q_hi)
+    assert sorted(zip(i.tolist(), j.tolist())) == _pairs(_dense(q_lo, q_hi, b_lo, b_hi))
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), n_q=st.integers(1, 12), n_b=st.integers(0, 30), n_zones=st.integers(1, 3))
+def test_corridor_hits_are_the_dense_test_within_a_zone(seed, n_q, n_b, n_zones):
+    """A corridor (a run of boxes) is hit exactly when one of its boxes meets a box of its own
+    zone other than its own row, as testing every box of every corridor densely."""
+    rng = np.random.default_rng(seed)
+    n_box = rng.integers(1, 5, n_q)
+    first = np.r_[0, np.cumsum(n_box)]
+    c_lo = np.round(rng.uniform(0, 20, (first[-1], 2)))
+    c_hi = c_lo + np.round(rng.uniform(0, 4, (first[-1], 2)))
+    b_lo = np.round(rng.uniform(0, 20, (n_b, 2)))
+    b_hi = b_lo + np.round(rng.uniform(0, 4, (n_b, 2)))
+    zone_q = rng.integers(0, n_zones, n_q)
+    row_q = rng.integers(0, max(n_b, 1), n_q)
+    zone_b = np.sort(rng.integers(0, n_zones, n_b))
+    row_b = rng.permutation(n_b)
+    hits = corridor_hits(zone_q, row_q, first, c_lo, c_hi, zone_b, row_b, b_lo, b_hi)
+    for q in range(n_q):
+        sl = slice(first[q], first[q + 1])
+        mine = [row_b[k] for k in range(n_b) if zone_b[k] == zone_q[q] and row_b[k] != row_q[q]]
+        want = bool(mine) and boxes_meet(c_lo[sl], c_hi[sl], b_lo[mine], b_hi[mine])
+        assert hits[q] == want
+    assert boxes_meet(np.zeros((1, 2)), np.ones((1, 2)), np.ones((1, 2)), np.full((1, 2), 2.0))  # touching
+    assert not boxes_meet(np.zeros((1, 2)), np.ones((1, 2)), np.full((1, 2), 1.5), np.full((1, 2), 2.0))

@@ -1,0 +1,122 @@
+"""Axis-aligned box joins for the junction layer (:mod:`tm.junctions`), vectorised.
+
+Boxes are ``(lo, hi)`` arrays of shape (n, 2), ``lo <= hi``; touching counts as
+meeting everywhere.  :class:`BoxGrid` pairs query boxes with boxes on a uniform
+grid, :class:`GuardIndex` pairs boxes with zone guards by a sorted sweep along x,
+:func:`corridor_hits` tests corridors (runs of boxes) against the boxes of their
+own zone, :func:`boxes_meet` two small sets of boxes densely.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from controllers.tolerances import SWEEP_MARGIN
+
+__all__ = ["BoxGrid", "GuardIndex", "corridor_hits", "boxes_meet"]
+
+
+def _cells(lo: np.ndarray, hi: np.ndarray, cell: float):
+    """Every (box, grid cell) pair of boxes no wider than ``cell``: at most 2 x 2 cells a box."""
+    c0 = np.floor(lo / cell).astype(np.int64)
+    c1 = np.floor(hi / cell).astype(np.int64)
+    box, key = [], []
+    for dx in (0, 1):
+        for dy in (0, 1):
+            ok = (c0[:, 0] + dx <= c1[:, 0]) & (c0[:, 1] + dy <= c1[:, 1])
+            box.append(np.flatnonzero(ok))
+            key.append((c0[ok, 0] + dx) * (1 << 32) + (c0[ok, 1] + dy))
+    return np.concatenate(box), np.concatenate(key)
+
+
+class BoxGrid:
+    """Boxes ``(lo[j], hi[j])`` bucketed on a uniform grid of square cells no smaller than the
+    widest box (so a box covers at most 2 x 2 cells), for :meth:`pairs`."""
+
+    def __init__(self, lo: np.ndarray, hi: np.ndarray, cell: float):
+        self.lo, self.hi, self.cell = lo, hi, cell
+        box, key = _cells(lo, hi, cell)
+        order = np.argsort(key, kind="stable")
+        self.key, self.box = key[order], box[order]
+
+    def pairs(self, q_lo: np.ndarray, q_hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(i, j)``: every query box ``i`` (no wider than the cell) that meets box ``j``
+        (touching counts), each pair once.  Boxes sharing a cell are tested exactly on both
+        axes; a pair is kept in one cell only, the one holding the larger of the two lower
+        corners.  (A sweep along x alone met every vehicle of the same north-south road.)"""
+        if not len(q_lo) or not len(self.lo):
+            return np.zeros(0, dtype=np.intp), np.zeros(0, dtype=np.intp)
+        qb, qk = _cells(q_lo, q_hi, self.cell)
+        start = np.searchsorted(self.key, qk, side="left")
+        count = np.searchsorted(self.key, qk, side="right") - start
+        i = np.repeat(qb, count)
+        k = np.repeat(qk, count)
+        j = self.box[np.repeat(start - np.cumsum(count) + count, count) + np.arange(int(count.sum()))]
+        lo, hi = self.lo, self.hi
+        ok = (hi[j, 0] >= q_lo[i, 0]) & (lo[j, 0] <= q_hi[i, 0]) & (lo[j, 1] <= q_hi[i, 1]) & (hi[j, 1] >= q_lo[i, 1])
+        i, j, k = i[ok], j[ok], k[ok]
+        ref = np.floor(np.maximum(q_lo[i], lo[j]) / self.cell).astype(np.int64)
+        once = ref[:, 0] * (1 << 32) + ref[:, 1] == k
+        return i[once], j[once]
+
+
+class GuardIndex:
+    """Guard boxes ``(lo[z], hi[z])`` sorted by their lower x, for :meth:`pairs`."""
+
+    def __init__(self, lo: np.ndarray, hi: np.ndarray):
+        self.lo, self.hi = lo, hi
+        self.order = np.argsort(lo[:, 0], kind="stable")
+        self.x_sorted = lo[self.order, 0]
+        self.width_x = float((hi[:, 0] - lo[:, 0]).max()) if len(lo) else 0.0
+
+    def pairs(self, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(i, z)``: every box ``i`` (``lo, hi`` of shape (n, 2)) that meets guard ``z``.
+
+        Box ``i`` can only meet the guards whose lower x lies in ``[lo_x - widest guard,
+        hi_x]`` (a ``searchsorted`` range, started ``SWEEP_MARGIN`` lower against rounding);
+        those candidate pairs are then tested on both axes.  Pairs sorted by ``i``.
+        """
+        zx = self.x_sorted
+        start = np.searchsorted(zx, lo[:, 0] - self.width_x - SWEEP_MARGIN, side="left")
+        count = np.maximum(np.searchsorted(zx, hi[:, 0], side="right") - start, 0)
+        i = np.repeat(np.arange(len(lo)), count)
+        q = np.repeat(start - np.cumsum(count) + count, count) + np.arange(int(count.sum()))
+        z = self.order[q]
+        zl, zh = self.lo, self.hi
+        ok = (lo[i, 0] <= zh[z, 0]) & (hi[i, 0] >= zl[z, 0]) & (lo[i, 1] <= zh[z, 1]) & (hi[i, 1] >= zl[z, 1])
+        return i[ok], z[ok]
+
+
+def corridor_hits(zone_q, row_q, first, c_lo, c_hi, zone_b, row_b, b_lo, b_hi) -> np.ndarray:
+    """Per query ``q``: whether one of its corridor boxes ``first[q]:first[q + 1]`` meets a box
+    ``row_b[k]`` of its own zone (``zone_b`` ascending), other than its own row ``row_q[q]``.
+
+    Candidates and the boxes of their zone are paired by ``searchsorted`` on the zone, then
+    each pair's corridor boxes are tested against its box (touching counts)."""
+    hits = np.zeros(len(zone_q), dtype=bool)
+    if not len(zone_b) or not len(zone_q):
+        return hits
+    s = np.searchsorted(zone_b, zone_q, side="left")
+    cnt = np.searchsorted(zone_b, zone_q, side="right") - s
+    q = np.repeat(np.arange(len(zone_q)), cnt)
+    k = np.repeat(s - np.cumsum(cnt) + cnt, cnt) + np.arange(int(cnt.sum()))
+    j = row_b[k]
+    # the corridor's bounding box first: most pairs of a zone are far apart
+    cb_lo = np.minimum.reduceat(c_lo, first[:-1], axis=0)
+    cb_hi = np.maximum.reduceat(c_hi, first[:-1], axis=0)
+    near = (j != row_q[q]) & np.all((cb_lo[q] <= b_hi[j]) & (cb_hi[q] >= b_lo[j]), axis=1)
+    q, j = q[near], j[near]
+    if not len(q):
+        return hits
+    n_box = first[q + 1] - first[q]
+    qq = np.repeat(q, n_box)
+    jj = np.repeat(j, n_box)
+    bb = np.repeat(first[q] - np.cumsum(n_box) + n_box, n_box) + np.arange(int(n_box.sum()))
+    meet = np.all((c_lo[bb] <= b_hi[jj]) & (c_hi[bb] >= b_lo[jj]), axis=1)
+    hits[qq[meet]] = True
+    return hits
+
+
+def boxes_meet(lo1: np.ndarray, hi1: np.ndarray, lo2: np.ndarray, hi2: np.ndarray) -> bool:
+    """Whether any box ``(lo1[i], hi1[i])`` meets any box ``(lo2[j], hi2[j])`` (touching counts)."""
+    return bool(np.any(np.all((lo1[:, None, :] <= hi2[None]) & (hi1[:, None, :] >= lo2[None]), axis=2)))
