@@ -7,14 +7,16 @@ manager.  One step (``Ts``) is:
 1. every active vehicle computes its membership index ``l`` w.r.t. its
    current waypoint and, when it may switch (``terminal``: ``l = 0``;
    ``early``: its state lies in the next waypoint's domain), a request
-   ``(l', r̄)`` w.r.t. the next waypoint;
+   ``(l', r̄)`` w.r.t. the next waypoint; requests into a junction guard
+   without one of its tokens are withheld (liveness: :mod:`tm.junctions`);
 2. the TM grants or denies the requests (:class:`tm.manager.TrafficManager`);
 3. granted vehicles switch; every vehicle applies the terminal law or the
    QP of eq. (6) (:class:`controllers.stmpc.STMPC`, vectorised per class);
 4. the plant steps with the disturbance policy; the index must strictly
    decrease until 0 and then stay 0 (tube invariant, counted otherwise);
 5. vehicles at their last waypoint with ``l = 0`` arrive; waiting vehicles
-   whose initial tube is free are admitted (condition (12));
+   whose initial tube is free (condition (12)) and misses every token holder's
+   corridor are admitted;
 6. the monitor checks footprints and claims; the world is pushed and stepped.
 """
 
@@ -310,9 +312,14 @@ class Cosim:
         kw = {}
         if with_requests:
             kw = dict(requesting=cat(RQ), req_centre=np.vstack(RC), req_index=cat(RL), req_heading=cat(RH))
-        state = FleetState(ids=ids, family=np.array(fam), centre=np.vstack(C), index=cat(L), heading=cat(H),
-                           length=cat(Ln), width=cat(Wd), **kw)
-        if with_requests and self.zones:
+        return FleetState(ids=ids, family=np.array(fam), centre=np.vstack(C), index=cat(L), heading=cat(H),
+                          length=cat(Ln), width=cat(Wd), **kw)
+
+    def _requests(self):
+        """The fleet state with every vehicle's index and request (None with no vehicle);
+        requests into a junction guard without its token withheld (:meth:`_gate`)."""
+        state = self._fleet(with_requests=True)
+        if state is not None and self.zones:
             tg = time.perf_counter()
             state = self._gate(state)
             self._ms_gate += (time.perf_counter() - tg) * 1e3
@@ -359,16 +366,19 @@ class Cosim:
         row = {"t_s": round(t_s, 6)}
         tt = time.perf_counter()
         self._ms_request = self._ms_gate = 0.0
-        state = self._fleet(with_requests=True)
+        # 1. membership indices and requests (controllers), withheld by the junction tokens (tm.junctions)
+        state = self._requests()
         n_req = n_go = 0
         ms_tm = ms_decide = 0.0
         if state is not None:
+            # 2. TM: Go/Stop for every request
             td = time.perf_counter()
             dec = self.tm.decide(state)
             ms_decide = (time.perf_counter() - td) * 1e3
             self.last_decision = dec
             ms_tm = (time.perf_counter() - tt) * 1e3
             n_req, n_go = int(state.requesting.sum()), int(dec.go.sum())
+            # 3a. switch on Go (k <- k + 1, l <- l'); denials counted
             o = 0  # the fleet state concatenates the non-empty groups in order
             for c, g in self.groups.items():
                 if not g.ids:
@@ -389,7 +399,7 @@ class Cosim:
                         rec.stop_episodes += 1
                 g.denied_last = denied
             row["edges"] = int(len(dec.edges))
-        # controls and plant
+        # 3b. controls (terminal law or the QP of eq. (6)); 4. plant, tube invariant checked
         tc = time.perf_counter()
         for c, g in self.groups.items():
             if not g.ids:
@@ -410,7 +420,7 @@ class Cosim:
         ms_ctl = (time.perf_counter() - tc) * 1e3
         self.t += 1
         t_next = self.t * s.Ts
-        # arrivals
+        # 5. arrivals
         for c, g in self.groups.items():
             if not g.ids:
                 continue
@@ -421,9 +431,9 @@ class Cosim:
                     self.records[g.ids[i]].arrived_s = t_next
                     self.world.finish(g.ids[i])
                 g.remove(done)
-        # admissions (condition (12)) against the claims of the vehicles now in the network
+        # 5. admissions (condition (12)) against the claims of the vehicles now in the network
         admitted = self._admit(t_next)
-        # monitor and world
+        # 6. monitor and world (push, step SUMO, its collisions); then the KPI row and observers
         tw = time.perf_counter()
         cur = self._fleet(with_requests=False)
         if cur is not None:

@@ -131,7 +131,7 @@ def test_junction_token_needs_room_for_the_claim_that_reaches_the_exit_slot(gap_
     sim = Cosim(CLASSES, [follower, leader], CosimSettings(disturbance="none"), zones=[zone])
     sim._admit(0.0)
     assert sorted(sim.records[v].admitted_s for v in "FL") == [0.0, 0.0]
-    state = sim._fleet(with_requests=True)
+    state = sim._requests()
     assert list(sim.zone_holders[0]) == (["F"] if granted else [])
     assert bool(state.requesting[state.ids.index("F")]) == granted
 
@@ -156,7 +156,7 @@ def _gate_once(paths, pending=()):
     sim = Cosim(CLASSES, specs, CosimSettings(disturbance="none"), zones=[Zone("J", **_JUNCTION)])
     sim._admit(0.0)
     assert all(sim.records[s.id].admitted_s == 0.0 for s in specs)
-    state = sim._fleet(with_requests=True)
+    state = sim._requests()
     asked = {v for v, q in zip(state.ids, state.requesting) if q}
     return sim, set(sim.zone_holders[0]), asked
 
