@@ -15,8 +15,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tm.boxes import BoxGrid, GuardIndex, boxes_meet, corridor_hits
 from controllers.tolerances import SWEEP_MARGIN
+from tm.boxes import BoxGrid, GuardIndex, boxes_meet, corridor_hits
 
 __all__ = ["Zone", "ClassReach", "JunctionFleet", "JunctionGate"]
 
@@ -46,6 +46,13 @@ class Zone:
     name: str
     lo: tuple
     hi: tuple
+
+    def __post_init__(self) -> None:
+        lo, hi = np.asarray(self.lo, dtype=float), np.asarray(self.hi, dtype=float)
+        if lo.shape != (2,) or hi.shape != (2,) or not np.all(np.isfinite(lo) & np.isfinite(hi)) \
+                or np.any(lo > hi):
+            raise ValueError(f"Zone {self.name!r}: lo and hi must be finite (x, y) pairs with lo <= hi, "
+                             f"got lo={self.lo}, hi={self.hi}")
 
 
 @dataclass(frozen=True, eq=False)

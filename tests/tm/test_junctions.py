@@ -226,3 +226,12 @@ def test_holders_corridors_never_meet_and_only_holders_ask_into_the_guard(case):
             if v in asked and reach and not inside:
                 assert v in gate.holders[0]
         k = {v: k[v] + (v in asked) * 3 for v in vehicles}
+
+
+def test_bad_zones_and_families_are_named():
+    with pytest.raises(ValueError, match=r"Zone 'J2': lo and hi must be finite .* lo <= hi"):
+        Zone("J2", (5.0, 0.0), (-5.0, 1.0))
+    with pytest.raises(ValueError, match="Zone 'J3'"):
+        Zone("J3", (0.0, 0.0, 0.0), (1.0, 1.0, 1.0))
+    with pytest.raises(ValueError, match="ClassReach.of: need the position sets P\\^0 .. P\\^N with N >= 1"):
+        ClassReach.of([np.zeros((4, 2))], 4.5, 1.8, True)
