@@ -99,7 +99,15 @@ def _cmd_run(args) -> int:
     print(f"written: {out / 'summary.json'}")
     if args.plots and (out / "summary.json").exists():
         _write_plots(out)
-    return 0 if summary.get("complete", True) else 1
+    if not summary.get("complete", True):
+        return 1
+    if summary.get("safe") is False:
+        from analysis.safety import UNSAFE_EXIT
+
+        fired = ", ".join(f"{k} {v}" for k, v in summary.get("safety_violations", {}).items())
+        print(f"muvsim run: UNSAFE: safety counters fired: {fired} (see {out / 'summary.json'})", file=sys.stderr)
+        return UNSAFE_EXIT
+    return 0
 
 
 def _cmd_report(args) -> int:

@@ -75,6 +75,9 @@ def run_scenario(name: str, out: Path, opts) -> dict:
             min_separation_m=float("inf"), stop_commands=0,
             travel_time_s=round(traj.steps * Ts, 3), complete=True,
         )
+        from analysis.safety import verdict
+
+        summary.update(verdict(summary))
     except SynthesisError as exc:
         summary.update(complete=False, error=f"class {vclass.name!r} cannot be synthesised: {exc}")
     except Exception as exc:  # keep what was written, say why the run is incomplete
@@ -94,6 +97,7 @@ def run_multi(name: str, out: Path, opts, world=None, specs=None) -> dict:
     from bridge.cosim import Cosim, CosimSettings
     from bridge.layouts import crossing, paper10, swap
     from controllers.classes import ClassError, builtin_classes
+    from controllers.synthesis import SynthesisError
     from tm.settings import TMSettings
 
     classes = builtin_classes()

@@ -26,6 +26,7 @@ from analysis.kpis import baseline_vehicle_table, read_tripinfo
 from analysis.halts import HaltCounter
 from analysis.mcap_log import observers_for
 from analysis.outputs import close_observers, write_run_tables
+from analysis.safety import verdict
 from bridge.scenarios import _write_summary
 from bridge.sumo_adapter import SumoAdapter, SumoError
 from bridge.waypoints import RouteError, load_net, trim_start
@@ -222,6 +223,7 @@ def run_sumo(target: str, out: Path, opts) -> dict:
                 collisions_sumo=len(sim.collisions_world),
                 vehicles_total=figures["vehicles"],
                 rtf=round(sim.t * sim.settings.Ts / wall, 3) if wall > 0 else None)
+            summary.update(verdict(summary))
         _write_summary(out, summary)
     return summary
 
