@@ -228,9 +228,30 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+#: Exit code of a run ended by Ctrl-C (128 + SIGINT, as a shell reports it).
+INTERRUPTED_EXIT = 130
+
+
+def _interrupted(args) -> int:
+    """The one line a Ctrl-C ends with: where the run stopped and where its outputs are."""
+    out = getattr(args, "out", None)
+    where = f"; outputs kept in {out}" if out else ""
+    t = None
+    if out and (Path(out) / "summary.json").exists():
+        try:
+            t = json.loads((Path(out) / "summary.json").read_text()).get("simulated_s")
+        except (OSError, ValueError):
+            t = None
+    print(f"interrupted at t = {t if t is not None else 0.0:g} s{where}", file=sys.stderr)
+    return INTERRUPTED_EXIT
+
+
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    return int(args.func(args))
+    try:
+        return int(args.func(args))
+    except KeyboardInterrupt:
+        return _interrupted(args)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -25,7 +25,7 @@ from bridge.pose import front_bumper, sumo_angle
 from analysis.kpis import baseline_vehicle_table, read_tripinfo
 from analysis.halts import HaltCounter
 from analysis.mcap_log import observers_for
-from analysis.outputs import close_observers, write_run_tables
+from analysis.outputs import StreamingOutputs, close_observers, write_run_tables
 from analysis.safety import verdict
 from bridge.scenarios import _write_summary
 from bridge.sumo_adapter import SumoAdapter, SumoError
@@ -184,6 +184,7 @@ def run_sumo(target: str, out: Path, opts) -> dict:
                                  disturbance=disturbance, solver=opts.solver, seed=seed, duration_s=duration)
         observers = [HaltCounter()] + observers_for(out, getattr(opts, "log", None) or "none",
                                                     {"scenario": str(target), "seed": seed, **summary["options"]})
+        observers.append(StreamingOutputs(out, dict(summary)))  # last: the row is complete by then
         sim = Cosim(classes, specs, settings, world=world, zones=junction_zones(net), observers=observers)
         bar = None
         if not getattr(opts, "quiet", False):
@@ -202,6 +203,9 @@ def run_sumo(target: str, out: Path, opts) -> dict:
         if bar is not None:
             bar.close()
         summary["complete"] = True
+    except KeyboardInterrupt:
+        summary["interrupted"] = True  # written below; the caller says where it stopped
+        raise
     except (ScenarioError, RouteError, SumoError) as exc:
         summary["error"] = f"{type(exc).__name__}: {exc}"
     except Exception as exc:
