@@ -107,6 +107,9 @@ def run_multi(name: str, out: Path, opts, world=None, specs=None) -> dict:
         raise ScenarioRunError(f"--vclass: unknown vehicle class {opts.vclass!r}; valid: {', '.join(classes)}")
     zones = None
     if specs is None:
+        if name in ("swap", "crossing") and opts.vehicles < (2 if name == "swap" else 1):
+            raise ScenarioRunError(f"--vehicles: {name} needs at least {2 if name == 'swap' else 1} vehicle(s), "
+                                   f"got {opts.vehicles}")
         if name == "paper10":
             specs = paper10({c: classes[c].model.delta for c in classes})
         elif name == "swap":

@@ -119,11 +119,25 @@ def junction_zones(net_path) -> list[Zone]:
     return zones
 
 
-def _classes_for(scenario, demand, classes):
+def _classes_for(scenario, demand, classes, source=None):
+    """The muvsim class of every vehicle: the scenario's mapping, or for a user's .sumocfg a
+    vType named like a class, else its SUMO vClass (``VCLASS_TO_CLASS``); any other vClass
+    (bicycle, pedestrian, ...) is refused by name, never driven as a car."""
+    from sumo_nets.scenario import VCLASS_TO_CLASS, ScenarioError
+
     out = {}
     for pv in demand.vehicles:
-        name = scenario.class_for(pv.type_id, pv.vclass) if scenario is not None else \
-            {"passenger": "car", "bus": "bus", "truck": "truck"}.get(pv.vclass, "car")
+        if scenario is not None:
+            name = scenario.class_for(pv.type_id, pv.vclass)
+        elif pv.type_id in ("car", "bus", "truck"):
+            name = pv.type_id
+        elif pv.vclass in VCLASS_TO_CLASS:
+            name = VCLASS_TO_CLASS[pv.vclass]
+        else:
+            raise ScenarioError(
+                f"{source or 'the demand'}: vehicle {pv.id!r}: vType {pv.type_id!r} has vClass {pv.vclass!r}, "
+                f"which muvsim cannot drive (it has no class for it); valid vClasses: "
+                f"{', '.join(sorted(VCLASS_TO_CLASS))} (or a vType named car, bus or truck)")
         if name not in classes:
             raise ValueError(f"vehicle {pv.id}: vType {pv.type_id!r} maps to unknown class {name!r}")
         out[pv.id] = name
@@ -168,7 +182,7 @@ def run_sumo(target: str, out: Path, opts) -> dict:
             return _run_baseline(adapter, sumocfg, tripinfo, seed, duration, out, summary, t0)
         demand = adapter.start(sumocfg, tripinfo_path=tripinfo, seed=seed, gui=opts.gui)
         classes = builtin_classes()
-        cls_of = _classes_for(scenario, demand, classes)
+        cls_of = _classes_for(scenario, demand, classes, source=sumocfg)
         geo = load_net(net)
         routes, specs = {}, []
         for pv in demand.vehicles:
