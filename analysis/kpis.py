@@ -272,7 +272,9 @@ def run_tables(sim, tripinfo=None) -> tuple[dict, pd.DataFrame, pd.DataFrame]:
     -------
     figures : dict
         :func:`summarise` of the tables plus the loop's safety counters
-        (``collisions_world, invariant_violations, constraint_violations``).
+        (``collisions_world, invariant_violations, claim_violations, footprint_overlaps,
+        constraint_violations``) and :func:`analysis.safety.verdict` of them (``safe``,
+        ``safety_violations``).
     steps, vehicles : DataFrame
     """
     from controllers.classes import builtin_classes
@@ -297,5 +299,10 @@ def run_tables(sim, tripinfo=None) -> tuple[dict, pd.DataFrame, pd.DataFrame]:
     figures.update(
         collisions_world=len(sim.collisions_world),
         invariant_violations=int(sim.invariant_violations + sim.monitor.claim_violations),
+        claim_violations=int(sim.monitor.claim_violations),
+        footprint_overlaps=int(sim.monitor.footprint_overlaps),
         constraint_violations=int(sim.constraint_violations))
+    from analysis.safety import verdict
+
+    figures.update(verdict(figures))
     return figures, steps, vehicles

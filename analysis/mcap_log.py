@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import time
 from itertools import chain, compress
 from pathlib import Path
@@ -254,6 +255,65 @@ class _TextCache:
         return out
 
 
+class _TailedFile:
+    """A write-only binary file that is a complete MCAP after every :meth:`flush`.
+
+    The MCAP writer's output is buffered here; :meth:`flush` writes what it buffered at the end
+    of the data so far followed by a minimal ending (``DataEnd``, a ``Footer`` with no summary,
+    the magic) in one ``pwrite``, and the next flush writes over that ending.  So a process
+    killed outright (SIGKILL) leaves a file that ``mcap.reader.make_reader`` opens and reads up
+    to the last flushed chunk (with no summary it reads linearly).  Killed *during* that one
+    ``pwrite`` (a few hundred microseconds a second) the ending can be torn.  :meth:`close`
+    writes the writer's real ending (summary, index) and truncates there.
+    """
+
+    def __init__(self, path):
+        from mcap.records import DataEnd, Footer
+        from mcap.data_stream import RecordBuilder
+        from mcap.writer import MCAP0_MAGIC
+
+        rb = RecordBuilder()
+        DataEnd(data_section_crc=0).write(rb)
+        Footer(summary_start=0, summary_offset_start=0, summary_crc=0).write(rb)
+        self._tail = bytes(rb.end()) + MCAP0_MAGIC
+        self._fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+        self._pos = 0          # bytes committed to the file (the data, without the ending)
+        self._buf = bytearray()
+
+    def write(self, data) -> int:
+        self._buf += data
+        return len(data)
+
+    def tell(self) -> int:
+        return self._pos + len(self._buf)
+
+    def seekable(self) -> bool:
+        return False
+
+    def _commit(self, ending: bytes) -> None:
+        data = bytes(self._buf) + ending
+        written = 0
+        while written < len(data):
+            written += os.pwrite(self._fd, data[written:], self._pos + written)
+        self._pos += len(self._buf)
+        self._buf.clear()
+
+    def flush(self) -> None:
+        if self._buf:
+            self._commit(self._tail)
+
+    def close(self) -> None:
+        """Write what is buffered (the writer's own ending once it finished) and truncate there."""
+        if self._fd < 0:
+            return
+        try:
+            self._commit(b"")
+            os.ftruncate(self._fd, self._pos)
+        finally:
+            os.close(self._fd)
+            self._fd = -1
+
+
 class McapLogger:
     """Observer of :class:`bridge.cosim.Cosim` writing ``run.mcap`` (zstd chunks).
 
@@ -269,18 +329,25 @@ class McapLogger:
 
     Notes
     -----
-    Call :meth:`close` (or use it as a context manager) to finish the file: an unfinished
-    MCAP has no summary section (readers then stream it).
+    Call :meth:`close` (or use it as a context manager) to finish the file (summary, index).
+    Until then the chunk in progress is closed every ``flush_s`` simulated seconds (mcap 1.6's
+    ``Writer.flush``; by size alone, 1 MiB chunks, a chunk could span minutes) and the file is
+    a complete MCAP without summary up to that chunk (:class:`_TailedFile`): a run killed
+    outright loses at most the last ``flush_s``.
     """
 
-    def __init__(self, path, level: str = "summary", metadata: dict | None = None):
+    def __init__(self, path, level: str = "summary", metadata: dict | None = None, flush_s: float = 1.0):
         from mcap.writer import CompressionType, Writer
 
         if level not in ("summary", "full"):
             raise ValueError(f"McapLogger: level must be 'summary' or 'full', got {level!r}")
+        if not flush_s > 0:
+            raise ValueError(f"McapLogger: flush_s must be > 0 s, got {flush_s}")
         self.path = Path(path)
         self.level = level
-        self._fh = open(self.path, "wb")
+        self.flush_s = float(flush_s)
+        self._next_flush = self.flush_s
+        self._fh = _TailedFile(self.path)
         self._w = Writer(self._fh, compression=CompressionType.ZSTD)
         self._w.start(profile="", library="muvsim")
         schema_ids = {name: self._w.register_schema(name, "jsonschema", json.dumps(s).encode())
@@ -378,6 +445,9 @@ class McapLogger:
                 self._put("/scene/claims", ns, self._claims_scene(stamp, clear, ids, req, go, edges, decision, state))
         elif self.level == "full":
             self._put("/scene/claims", ns, '{"deletions":%s,"entities":[]}' % clear)
+        if t_end + 1e-9 >= self._next_flush:  # close the chunk: the file is readable up to here
+            self._next_flush += self.flush_s
+            self._w.flush()
         ms = (time.perf_counter() - t0) * 1e3
         self.total_ms += ms
         row["logging_ms"] = round(ms, 4)

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import time
 from pathlib import Path
@@ -56,10 +57,38 @@ def _cmd_sets(args) -> int:
 FREE_PLANE = ("single", "paper10", "swap", "crossing")
 
 
+def _make_out(out: Path, option: str = "--out") -> str | None:
+    """Create the output directory; a message naming the option and the path when it cannot be."""
+    if out.exists() and not out.is_dir():
+        return f"{option} {out}: is a file, not a directory; give a directory (created if missing)"
+    for parent in out.parents:
+        if parent.exists() and not parent.is_dir():
+            return f"{option} {out}: cannot create it: {parent} is a file, not a directory"
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        return f"{option} {out}: cannot create the directory: {exc.strerror or exc}"
+    if not os.access(out, os.W_OK | os.X_OK):
+        return f"{option} {out}: the directory is not writable"
+    return None
+
+
+#: Fewest vehicles ``--vehicles`` may ask of each free-plane scenario that takes it.
+MIN_VEHICLES = {"swap": 2, "crossing": 1}
+
+
 def _cmd_run(args) -> int:
     from bridge.scenarios import ScenarioRunError, run_scenario
 
     out = Path(args.out)
+    if args.scenario in MIN_VEHICLES and args.vehicles < MIN_VEHICLES[args.scenario]:
+        print(f"muvsim run: --vehicles: {args.scenario} needs at least {MIN_VEHICLES[args.scenario]} "
+              f"vehicle(s), got {args.vehicles}", file=sys.stderr)
+        return 2
+    problem = _make_out(out)
+    if problem:
+        print(f"muvsim run: {problem}", file=sys.stderr)
+        return 2
     if args.scenario in FREE_PLANE:
         for name, default in (("tm", "optimal"), ("check", "union"), ("switching", "early"),
                               ("disturbance", "random")):
@@ -79,8 +108,10 @@ def _cmd_run(args) -> int:
         from bridge.sumo_world import run_sumo
 
         summary = run_sumo(args.scenario, out, args)
-        if "error" in summary:
-            print(f"muvsim run: {summary['error']}", file=sys.stderr)
+    if "error" in summary:
+        if getattr(args, "debug", False) and summary.get("traceback"):
+            print(summary["traceback"], file=sys.stderr)
+        print(f"muvsim run: {summary['error']}", file=sys.stderr)
     keys = ("scenario", "baseline", "steps", "vehicles", "vehicles_total", "vehicles_arrived", "finished",
             "collisions_sumo", "collisions_geometric", "invariant_violations", "constraint_violations",
             "min_separation_m", "stop_commands", "mean_travel_time_s", "mean_delay_s", "throughput_vph",
@@ -99,7 +130,15 @@ def _cmd_run(args) -> int:
     print(f"written: {out / 'summary.json'}")
     if args.plots and (out / "summary.json").exists():
         _write_plots(out)
-    return 0 if summary.get("complete", True) else 1
+    if not summary.get("complete", True):
+        return 1
+    if summary.get("safe") is False:
+        from analysis.safety import UNSAFE_EXIT
+
+        fired = ", ".join(f"{k} {v}" for k, v in summary.get("safety_violations", {}).items())
+        print(f"muvsim run: UNSAFE: safety counters fired: {fired} (see {out / 'summary.json'})", file=sys.stderr)
+        return UNSAFE_EXIT
+    return 0
 
 
 def _cmd_report(args) -> int:
@@ -157,13 +196,16 @@ def _write_plots(run: Path, vs: Path | None = None) -> None:
 
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="muvsim", description=__doc__.splitlines()[0])
+    common = argparse.ArgumentParser(add_help=False)
+    common.add_argument("--debug", action="store_true", help="show the Python traceback of an error")
     sub = p.add_subparsers(dest="command", required=True)
-    s = sub.add_parser("sets", help="synthesise a vehicle class's ST-MPC sets and describe them")
+    s = sub.add_parser("sets", parents=[common],
+                       help="synthesise a vehicle class's ST-MPC sets and describe them")
     s.add_argument("vclass", metavar="CLASS")
     s.add_argument("--json", action="store_true", help="print one JSON object")
     s.add_argument("--no-cache", action="store_true", help="ignore and do not write the set cache")
     s.set_defaults(func=_cmd_sets)
-    r = sub.add_parser("run", help="run a scenario")
+    r = sub.add_parser("run", parents=[common], help="run a scenario")
     r.add_argument("scenario", nargs="?", default="grid",
                    help="grid (default), grid-large, a scenario .toml, a .sumocfg, or a free-plane "
                         "scenario: single, paper10, swap, crossing")
@@ -186,13 +228,15 @@ def build_parser() -> argparse.ArgumentParser:
                         "(+ claim polygons)")
     r.add_argument("--plots", action="store_true", help="write plots into DIR/plots after the run")
     r.set_defaults(func=_cmd_run)
-    q = sub.add_parser("report", help="KPI statistics of a run, or two runs compared (report.csv)")
+    q = sub.add_parser("report", parents=[common],
+                       help="KPI statistics of a run, or two runs compared (report.csv)")
     q.add_argument("run", metavar="RUN_DIR")
     q.add_argument("--vs", metavar="OTHER_RUN_DIR", default=None,
                    help="compare with this run (same demand): difference and ratio")
     q.add_argument("--plots", action="store_true", help="also write plots into RUN_DIR/plots")
     q.set_defaults(func=_cmd_report)
-    w = sub.add_parser("sweep", help="run a scenario over seeds and options in parallel (Dask): one KPI table")
+    w = sub.add_parser("sweep", parents=[common],
+                       help="run a scenario over seeds and options in parallel (Dask): one KPI table")
     w.add_argument("scenario", help="grid, grid-large, a scenario .toml, a .sumocfg, or a free-plane scenario: "
                                     "single, paper10, swap, crossing")
     w.add_argument("--out", default="runs/sweep",
@@ -220,9 +264,36 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+#: Exit code of a run ended by Ctrl-C (128 + SIGINT, as a shell reports it).
+INTERRUPTED_EXIT = 130
+
+
+def _interrupted(args) -> int:
+    """The one line a Ctrl-C ends with: where the run stopped and where its outputs are."""
+    out = getattr(args, "out", None)
+    where = f"; outputs kept in {out}" if out else ""
+    t = None
+    if out and (Path(out) / "summary.json").exists():
+        try:
+            t = json.loads((Path(out) / "summary.json").read_text()).get("simulated_s")
+        except (OSError, ValueError):
+            t = None
+    print(f"interrupted at t = {t:g} s{where}" if t is not None else f"interrupted{where}", file=sys.stderr)
+    return INTERRUPTED_EXIT
+
+
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    return int(args.func(args))
+    try:
+        return int(args.func(args))
+    except KeyboardInterrupt:
+        return _interrupted(args)
+    except Exception as exc:  # never a raw traceback for the user; --debug shows it
+        if getattr(args, "debug", False):
+            raise
+        print(f"muvsim {args.command}: {type(exc).__name__}: {exc} (run with --debug for the traceback)",
+              file=sys.stderr)
+        return 1
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -8,7 +8,6 @@ fails half-way (``summary.json`` then says ``"complete": false`` and why).
 
 from __future__ import annotations
 
-import json
 import time
 import traceback
 from pathlib import Path
@@ -26,9 +25,9 @@ class ScenarioRunError(ValueError):
 
 
 def _write_summary(out: Path, summary: dict) -> None:
-    tmp = out / "summary.json.tmp"
-    tmp.write_text(json.dumps(summary, indent=2, default=float))
-    tmp.replace(out / "summary.json")
+    from analysis.outputs import write_summary
+
+    write_summary(out, summary)
 
 
 def run_scenario(name: str, out: Path, opts) -> dict:
@@ -75,6 +74,12 @@ def run_scenario(name: str, out: Path, opts) -> dict:
             min_separation_m=float("inf"), stop_commands=0,
             travel_time_s=round(traj.steps * Ts, 3), complete=True,
         )
+        from analysis.safety import verdict
+
+        summary.update(verdict(summary))
+    except KeyboardInterrupt:
+        summary["interrupted"] = True
+        raise
     except SynthesisError as exc:
         summary.update(complete=False, error=f"class {vclass.name!r} cannot be synthesised: {exc}")
     except Exception as exc:  # keep what was written, say why the run is incomplete
@@ -90,10 +95,11 @@ def run_multi(name: str, out: Path, opts, world=None, specs=None) -> dict:
     """Run a multi-vehicle scenario through :class:`bridge.cosim.Cosim`; write summary and CSVs."""
     from analysis.halts import HaltCounter
     from analysis.mcap_log import observers_for
-    from analysis.outputs import close_observers, write_run_tables
+    from analysis.outputs import StreamingOutputs, close_observers, write_run_tables
     from bridge.cosim import Cosim, CosimSettings
     from bridge.layouts import crossing, paper10, swap
     from controllers.classes import ClassError, builtin_classes
+    from controllers.synthesis import SynthesisError
     from tm.settings import TMSettings
 
     classes = builtin_classes()
@@ -101,6 +107,9 @@ def run_multi(name: str, out: Path, opts, world=None, specs=None) -> dict:
         raise ScenarioRunError(f"--vclass: unknown vehicle class {opts.vclass!r}; valid: {', '.join(classes)}")
     zones = None
     if specs is None:
+        if name in ("swap", "crossing") and opts.vehicles < (2 if name == "swap" else 1):
+            raise ScenarioRunError(f"--vehicles: {name} needs at least {2 if name == 'swap' else 1} vehicle(s), "
+                                   f"got {opts.vehicles}")
         if name == "paper10":
             specs = paper10({c: classes[c].model.delta for c in classes})
         elif name == "swap":
@@ -123,10 +132,14 @@ def run_multi(name: str, out: Path, opts, world=None, specs=None) -> dict:
                                  seed=opts.seed, duration_s=opts.duration)
         observers = [HaltCounter()] + observers_for(out, getattr(opts, "log", None) or "none",
                                                     {"scenario": name, "seed": opts.seed, **options})
+        observers.append(StreamingOutputs(out, dict(summary)))  # last: the row is complete by then
         sim = Cosim(classes, specs, settings, world=world, zones=zones, observers=observers)
         max_steps = int(getattr(opts, "max_steps", 0) or 20000)
         sim.run(max_steps)
         summary["complete"] = True
+    except KeyboardInterrupt:
+        summary["interrupted"] = True  # written below; the caller says where it stopped
+        raise
     except (SynthesisError, ClassError, ValueError) as exc:
         summary["error"] = f"{type(exc).__name__}: {exc}"
     except Exception as exc:  # keep what was written, say why the run is incomplete

@@ -25,7 +25,8 @@ from bridge.pose import front_bumper, sumo_angle
 from analysis.kpis import baseline_vehicle_table, read_tripinfo
 from analysis.halts import HaltCounter
 from analysis.mcap_log import observers_for
-from analysis.outputs import close_observers, write_run_tables
+from analysis.outputs import StreamingOutputs, close_observers, write_run_tables
+from analysis.safety import verdict
 from bridge.scenarios import _write_summary
 from bridge.sumo_adapter import SumoAdapter, SumoError
 from bridge.waypoints import RouteError, load_net, trim_start
@@ -118,11 +119,25 @@ def junction_zones(net_path) -> list[Zone]:
     return zones
 
 
-def _classes_for(scenario, demand, classes):
+def _classes_for(scenario, demand, classes, source=None):
+    """The muvsim class of every vehicle: the scenario's mapping, or for a user's .sumocfg a
+    vType named like a class, else its SUMO vClass (``VCLASS_TO_CLASS``); any other vClass
+    (bicycle, pedestrian, ...) is refused by name, never driven as a car."""
+    from sumo_nets.scenario import VCLASS_TO_CLASS, ScenarioError
+
     out = {}
     for pv in demand.vehicles:
-        name = scenario.class_for(pv.type_id, pv.vclass) if scenario is not None else \
-            {"passenger": "car", "bus": "bus", "truck": "truck"}.get(pv.vclass, "car")
+        if scenario is not None:
+            name = scenario.class_for(pv.type_id, pv.vclass)
+        elif pv.type_id in ("car", "bus", "truck"):
+            name = pv.type_id
+        elif pv.vclass in VCLASS_TO_CLASS:
+            name = VCLASS_TO_CLASS[pv.vclass]
+        else:
+            raise ScenarioError(
+                f"{source or 'the demand'}: vehicle {pv.id!r}: vType {pv.type_id!r} has vClass {pv.vclass!r}, "
+                f"which muvsim cannot drive (it has no class for it); valid vClasses: "
+                f"{', '.join(sorted(VCLASS_TO_CLASS))} (or a vType named car, bus or truck)")
         if name not in classes:
             raise ValueError(f"vehicle {pv.id}: vType {pv.type_id!r} maps to unknown class {name!r}")
         out[pv.id] = name
@@ -167,7 +182,7 @@ def run_sumo(target: str, out: Path, opts) -> dict:
             return _run_baseline(adapter, sumocfg, tripinfo, seed, duration, out, summary, t0)
         demand = adapter.start(sumocfg, tripinfo_path=tripinfo, seed=seed, gui=opts.gui)
         classes = builtin_classes()
-        cls_of = _classes_for(scenario, demand, classes)
+        cls_of = _classes_for(scenario, demand, classes, source=sumocfg)
         geo = load_net(net)
         routes, specs = {}, []
         for pv in demand.vehicles:
@@ -183,6 +198,7 @@ def run_sumo(target: str, out: Path, opts) -> dict:
                                  disturbance=disturbance, solver=opts.solver, seed=seed, duration_s=duration)
         observers = [HaltCounter()] + observers_for(out, getattr(opts, "log", None) or "none",
                                                     {"scenario": str(target), "seed": seed, **summary["options"]})
+        observers.append(StreamingOutputs(out, dict(summary)))  # last: the row is complete by then
         sim = Cosim(classes, specs, settings, world=world, zones=junction_zones(net), observers=observers)
         bar = None
         if not getattr(opts, "quiet", False):
@@ -201,6 +217,9 @@ def run_sumo(target: str, out: Path, opts) -> dict:
         if bar is not None:
             bar.close()
         summary["complete"] = True
+    except KeyboardInterrupt:
+        summary["interrupted"] = True  # written below; the caller says where it stopped
+        raise
     except (ScenarioError, RouteError, SumoError) as exc:
         summary["error"] = f"{type(exc).__name__}: {exc}"
     except Exception as exc:
@@ -222,6 +241,7 @@ def run_sumo(target: str, out: Path, opts) -> dict:
                 collisions_sumo=len(sim.collisions_world),
                 vehicles_total=figures["vehicles"],
                 rtf=round(sim.t * sim.settings.Ts / wall, 3) if wall > 0 else None)
+            summary.update(verdict(summary))
         _write_summary(out, summary)
     return summary
 

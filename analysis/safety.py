@@ -1,0 +1,43 @@
+"""The run's safety verdict: every safety counter of ``summary.json`` and whether any fired.
+
+A run whose counters are all zero is ``safe``; any non-zero counter makes the
+summary say ``"safe": false`` and list the counters that fired in
+``safety_violations`` (``muvsim run`` then exits with :data:`UNSAFE_EXIT`).
+What each counter checks (see ``SAFETY.md``):
+
+``collisions_sumo``
+    unique vehicle pairs SUMO itself reported colliding (SUMO runs only).
+``collisions_world``
+    unique pairs the world adapter reported (SUMO's collisions in a SUMO run).
+``collisions_geometric``
+    pair-steps of overlapping footprints, summed from ``steps.csv``.
+``footprint_overlaps``
+    the same pair-steps as totalled by the runtime monitor itself (a cross-check).
+``claim_violations``
+    pair-steps of conflicting claims after a decision (the TM's invariant).
+``invariant_violations``
+    vehicle-steps whose membership index did not strictly decrease (nor stay 0),
+    plus the claim violations (the tube invariant as a whole).
+``constraint_violations``
+    vehicle-steps with a state outside the class's state constraints.
+"""
+
+from __future__ import annotations
+
+__all__ = ["SAFETY_COUNTERS", "UNSAFE_EXIT", "verdict"]
+
+#: Every safety counter a summary may hold, in the order reports list them.
+SAFETY_COUNTERS = ("collisions_sumo", "collisions_world", "collisions_geometric", "footprint_overlaps",
+                   "claim_violations", "invariant_violations", "constraint_violations")
+
+#: Exit code of ``muvsim run`` when a complete run's safety counters fired.
+UNSAFE_EXIT = 3
+
+
+def verdict(summary: dict) -> dict:
+    """``{"safe": bool, "safety_violations": {counter: count}}`` of a summary's counters.
+
+    Counters missing from ``summary`` (or None) are not judged.
+    """
+    fired = {k: int(summary[k]) for k in SAFETY_COUNTERS if summary.get(k)}
+    return {"safe": not fired, "safety_violations": fired}
