@@ -181,3 +181,46 @@ def format_report(df: pd.DataFrame, a: RunData, b: RunData | None = None) -> str
     note = ("statistics over arrived vehicles; halt = speed <= 0.1 m/s (as SUMO's waiting), stop = denied TM "
             "request;\ndifference = run - vs, ratio = run / vs")
     return f"{head}\n{note}\n{df.to_string(index=False, float_format=lambda x: f'{x:.3f}')}"
+
+
+#: Rows of the closing table of ``muvsim run`` (names as in ``summary.json``).
+SUMMARY_ROWS = ("scenario", "baseline", "seed", "vehicles_arrived", "stop_reason", "simulated_s", "steps",
+                "collisions_sumo", "collisions_geometric", "invariant_violations", "constraint_violations",
+                "min_separation_m", "stop_commands", "mean_travel_time_s", "mean_delay_s", "throughput_vph",
+                "rtf", "wall_s", "error")
+
+
+def format_summary(summary: dict) -> str:
+    """The closing table of ``muvsim run``: the figures of ``summary.json``, named as there, rounded.
+
+    ``vehicles_arrived`` reads "A of N (P %)" with N the demand (``vehicles_total``, or
+    ``vehicles`` for a free-plane run); means over arrived vehicles say "no vehicle
+    arrived" when none did; ``min_separation_m`` says so when no two vehicles were in
+    the world at once.
+    """
+    from analysis.readable import fmt
+
+    s = summary
+    total = s.get("vehicles_total", s.get("vehicles"))
+    rows = []
+    for k in SUMMARY_ROWS:
+        if k not in s and k != "vehicles_arrived":
+            continue
+        v = s.get(k)
+        if k == "vehicles_arrived":
+            if v is None:
+                continue
+            text = f"{int(v)}"
+            if total:
+                text += f" of {int(total)} (vehicles_total; {100.0 * v / total:.1f} %)"
+        elif k in ("mean_travel_time_s", "mean_delay_s"):
+            text = fmt(v, k, missing="no vehicle arrived") + ("" if v is None else "  (over arrived vehicles)")
+        elif k == "min_separation_m":
+            text = fmt(v, k) if v is not None and v != float("inf") else "never two vehicles at once"
+        elif k == "rtf":
+            text = fmt(v, k) + "  (simulated s per wall s)" if v is not None else "-"
+        else:
+            text = fmt(v, k)
+        rows.append((k, text))
+    width = max(len(k) for k, _ in rows) if rows else 0
+    return "\n".join(f"{k:<{width}}  {t}" for k, t in rows)

@@ -81,21 +81,17 @@ def _cmd_run(args) -> int:
         summary = run_sumo(args.scenario, out, args)
         if "error" in summary:
             print(f"muvsim run: {summary['error']}", file=sys.stderr)
-    keys = ("scenario", "baseline", "steps", "vehicles", "vehicles_total", "vehicles_arrived", "finished",
-            "collisions_sumo", "collisions_geometric", "invariant_violations", "constraint_violations",
-            "min_separation_m", "stop_commands", "mean_travel_time_s", "mean_delay_s", "throughput_vph",
-            "rtf", "wall_s", "error")
-    width = max(len(k) for k in keys)
-    for k in keys:
-        if k in summary:
-            print(f"{k:<{width}}  {summary[k]}")
+    from analysis.report import SUMMARY_ROWS, format_summary
+
+    print(format_summary(summary))
+    width = max(len(k) for k in SUMMARY_ROWS)
     if (out / "steps.csv").exists() and not summary.get("baseline") == "sumo":
         import pandas as pd
 
         from analysis.kpis import timing_means
 
         ms = timing_means(pd.read_csv(out / "steps.csv"))
-        print("ms per step".ljust(width) + "  " + ", ".join(f"{k[:-3]} {v:.3f}" for k, v in ms.items()))
+        print("wall ms per step".ljust(width) + "  " + ", ".join(f"{k[:-3]} {v:.3f}" for k, v in ms.items()))
     print(f"written: {out / 'summary.json'}")
     if args.plots and (out / "summary.json").exists():
         _write_plots(out)
@@ -155,6 +151,24 @@ def _write_plots(run: Path, vs: Path | None = None) -> None:
         print(f"plot {kind}: {path}")
 
 
+def _duration(text: str) -> float:
+    """``--duration``: simulated seconds, a finite number > 0."""
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be simulated seconds (a number > 0), got {text!r}") from None
+    if not (v > 0 and v != float("inf")):
+        raise argparse.ArgumentTypeError(f"must be > 0 simulated seconds, got {text!r} (leave --duration out "
+                                         "to run until every vehicle has arrived)")
+    return v
+
+
+DURATION_HELP = ("stop after S simulated seconds, or earlier once every vehicle of the demand has arrived. "
+                 "Default: until every vehicle has arrived, at most 3 x the departure window (the last "
+                 "requested departure, at least 60 s; 900 s for grid); the closing table says why the run "
+                 "stopped and how many vehicles are still in the network")
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="muvsim", description=__doc__.splitlines()[0])
     sub = p.add_subparsers(dest="command", required=True)
@@ -179,7 +193,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--gui", action="store_true", help="sumo-gui (needs a display)")
     r.add_argument("--quiet", action="store_true", help="no progress bar")
     r.add_argument("--solver", choices=["exact", "daqp", "proxsuite"], default="exact")
-    r.add_argument("--duration", type=float, default=None, help="simulated seconds (default: until done)")
+    r.add_argument("--duration", type=_duration, default=None, metavar="S", help=DURATION_HELP)
     r.add_argument("--vehicles", type=int, default=8, help="vehicles in swap")
     r.add_argument("--log", choices=["none", "summary", "full"], default="summary",
                    help="run.mcap for Foxglove: none, summary (states, decisions; default) or full "
@@ -205,7 +219,9 @@ def build_parser() -> argparse.ArgumentParser:
     w.add_argument("--disturbance", choices=["random", "adversarial", "none"], nargs="+", default=None)
     w.add_argument("--solver", choices=["exact", "daqp", "proxsuite"], nargs="+", default=None,
                    help="default exact")
-    w.add_argument("--duration", type=float, default=None, help="simulated seconds (default: the scenario's)")
+    w.add_argument("--duration", type=_duration, default=None, metavar="S",
+                   help="each run's --duration (as muvsim run: " + DURATION_HELP.split(". ", 1)[0] + "; default: "
+                        "until every vehicle has arrived, at most 3 x the departure window)")
     w.add_argument("--baseline", action="store_true", help="add one --baseline sumo run per seed")
     w.add_argument("--log", choices=["none", "summary", "full"], default="none",
                    help="run.mcap of each run (default none)")
