@@ -169,6 +169,11 @@ DURATION_HELP = ("stop after S simulated seconds, or earlier once every vehicle 
                  "stopped and how many vehicles are still in the network")
 
 
+SEED_HELP = ("seed of the run: draws a generated scenario's demand (randomTrips' seed and the class "
+             "assignment) as well as SUMO's seed, the disturbances and the TM's tie-breaks; a .sumocfg's demand "
+             "is its own and does not change. Default: the scenario's seed (0 for free-plane scenarios)")
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="muvsim", description=__doc__.splitlines()[0])
     sub = p.add_subparsers(dest="command", required=True)
@@ -182,7 +187,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="grid (default), grid-large, a scenario .toml, a .sumocfg, or a free-plane "
                         "scenario: single, paper10, swap, crossing")
     r.add_argument("--out", default="runs/latest", help="output directory (default runs/latest)")
-    r.add_argument("--seed", type=int, default=None, help="default: the scenario's seed (0 free-plane)")
+    r.add_argument("--seed", type=int, default=None, help=SEED_HELP)
     r.add_argument("--vclass", default="paper-a", help="vehicle class for single/swap/crossing")
     r.add_argument("--tm", choices=["greedy", "optimal"], default=None, help="default: the scenario's")
     r.add_argument("--check", choices=["union", "timed"], default=None)
@@ -211,7 +216,9 @@ def build_parser() -> argparse.ArgumentParser:
                                     "single, paper10, swap, crossing")
     w.add_argument("--out", default="runs/sweep",
                    help="output directory: DIR/<run label>/ per run and DIR/sweep.csv (default runs/sweep)")
-    w.add_argument("--seeds", type=int, nargs="+", required=True, metavar="SEED", help="seeds to run")
+    w.add_argument("--seeds", type=int, nargs="+", required=True, metavar="SEED",
+                   help="seeds to run, each as muvsim run --seed: a generated scenario's demand is drawn anew "
+                        "per seed, so means over seeds are means over traffic (a .sumocfg's demand is fixed)")
     w.add_argument("--tm", choices=["greedy", "optimal"], nargs="+", default=None,
                    help="policies to sweep (default: the scenario's)")
     w.add_argument("--check", choices=["union", "timed"], nargs="+", default=None)

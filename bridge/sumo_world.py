@@ -16,6 +16,7 @@ import sys
 import time
 import traceback
 import xml.etree.ElementTree as ET
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -152,10 +153,14 @@ def run_sumo(target: str, out: Path, opts) -> dict:
                                                  for k in ("tm", "check", "switching", "disturbance"))
         else:
             scenario = load_scenario(target)
+            if opts.seed is not None and scenario.demand is not None:  # --seed draws the demand too
+                scenario = replace(scenario, demand=replace(scenario.demand, seed=opts.seed))
             files = materialise(scenario, out / "inputs")
             sumocfg, net = files.sumocfg, files.net
             seed = scenario.seed if opts.seed is None else opts.seed
             routes_in, additional = files.routes, ()
+            if scenario.demand is not None:
+                summary["demand_seed"] = scenario.demand.seed
             tm = opts.tm or scenario.tm
             check = opts.check or scenario.check
             switching = opts.switching or scenario.switching
