@@ -92,14 +92,26 @@ def _cmd_run(args) -> int:
 
         ms = timing_means(pd.read_csv(out / "steps.csv"))
         print("wall ms per step".ljust(width) + "  " + ", ".join(f"{k[:-3]} {v:.3f}" for k, v in ms.items()))
+    if getattr(args, "vs", None) and (out / "summary.json").exists():
+        _print_vs(out, Path(args.vs))
     print(f"written: {out / 'summary.json'}")
     if args.plots and (out / "summary.json").exists():
         _write_plots(out)
     return 0 if summary.get("complete", True) else 1
 
 
+def _print_vs(out: Path, base: Path) -> None:
+    """The closing comparison of ``muvsim run --vs BASE`` (a message, never an exception)."""
+    from analysis.report import DemandMismatch, format_brief_comparison, load_run
+
+    try:
+        print(format_brief_comparison(load_run(out), load_run(base)))
+    except (FileNotFoundError, DemandMismatch) as exc:
+        print(f"muvsim run: no comparison with {base}: {exc}", file=sys.stderr)
+
+
 def _cmd_report(args) -> int:
-    from analysis.report import DemandMismatch, format_report, load_run, report_table
+    from analysis.report import DemandMismatch, format_report, load_run, report_path, report_table
 
     try:
         a = load_run(args.run)
@@ -109,7 +121,7 @@ def _cmd_report(args) -> int:
         print(f"muvsim report: {exc}", file=sys.stderr)
         return 2
     print(format_report(df, a, b))
-    dest = Path(args.run) / "report.csv"
+    dest = report_path(a, b)
     df.to_csv(dest, index=False)
     print(f"written: {dest}")
     if args.plots:
@@ -204,6 +216,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="run.mcap for Foxglove: none, summary (states, decisions; default) or full "
                         "(+ claim polygons)")
     r.add_argument("--plots", action="store_true", help="write plots into DIR/plots after the run")
+    r.add_argument("--vs", metavar="BASE_DIR", default=None,
+                   help="after the run, compare with this run of the same demand (e.g. a --baseline sumo run): "
+                        "arrivals, per-vehicle ratios over the vehicles both landed, the whole demand censored")
     r.set_defaults(func=_cmd_run)
     q = sub.add_parser("report", help="KPI statistics of a run, or two runs compared (report.csv)")
     q.add_argument("run", metavar="RUN_DIR")
