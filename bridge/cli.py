@@ -56,9 +56,31 @@ def _cmd_sets(args) -> int:
 FREE_PLANE = ("single", "paper10", "swap", "crossing")
 
 
+def scenario_problem(name: str) -> str | None:
+    """Why ``name`` is not a scenario ``muvsim run`` can run (listing every valid one), or None.
+
+    Checked before anything is written, so a wrong name creates no output folder.
+    """
+    from sumo_nets.scenario import builtin_scenarios
+
+    if name in FREE_PLANE:
+        return None
+    path = Path(name).expanduser()
+    if name.endswith((".toml", ".sumocfg")):
+        return None if path.is_file() else f"scenario file {path} does not exist"
+    if name in builtin_scenarios() or path.is_file():
+        return None
+    return (f"unknown scenario {name!r}; valid: {', '.join(builtin_scenarios())} (SUMO, built in), "
+            f"{', '.join(FREE_PLANE)} (free plane), or the path of a scenario .toml or a SUMO .sumocfg file")
+
+
 def _cmd_run(args) -> int:
     from bridge.scenarios import ScenarioRunError, run_scenario
 
+    problem = scenario_problem(args.scenario)
+    if problem:
+        print(f"muvsim run: {problem}", file=sys.stderr)
+        return 2
     out = Path(args.out)
     if args.scenario in FREE_PLANE:
         for name, default in (("tm", "optimal"), ("check", "union"), ("switching", "early"),
@@ -132,6 +154,10 @@ def _cmd_report(args) -> int:
 def _cmd_sweep(args) -> int:
     from bridge.sweep import SweepSettings, SweepSettingsError, format_table, sweep
 
+    problem = scenario_problem(args.scenario)
+    if problem:
+        print(f"muvsim sweep: {problem}", file=sys.stderr)
+        return 2
     try:
         settings = SweepSettings(
             scenario=args.scenario, seeds=tuple(args.seeds), out=Path(args.out), tm=tuple(args.tm or ()),
@@ -163,6 +189,15 @@ def _write_plots(run: Path, vs: Path | None = None) -> None:
         print(f"plot {kind}: {path}")
 
 
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("muvsim")
+    except PackageNotFoundError:  # pragma: no cover - run from a tree that was never installed
+        return "unknown (not installed)"
+
+
 def _duration(text: str) -> float:
     """``--duration``: simulated seconds, a finite number > 0."""
     try:
@@ -187,7 +222,11 @@ SEED_HELP = ("seed of the run: draws a generated scenario's demand (randomTrips'
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="muvsim", description=__doc__.splitlines()[0])
+    p = argparse.ArgumentParser(
+        prog="muvsim", description="muvsim: collision-free co-simulation of automated vehicles (set-theoretic "
+                                   "MPC and a traffic manager) in SUMO city traffic.",
+        epilog="muvsim COMMAND --help describes a command's options.")
+    p.add_argument("--version", action="version", version=f"muvsim {_version()}")
     sub = p.add_subparsers(dest="command", required=True)
     s = sub.add_parser("sets", help="synthesise a vehicle class's ST-MPC sets and describe them")
     s.add_argument("vclass", metavar="CLASS")
