@@ -187,6 +187,13 @@ def _write_plots(run: Path, vs: Path | None = None) -> None:
         return
     for kind, path in written.items():
         print(f"plot {kind}: {path}")
+    from analysis.report import DemandMismatch
+    from analysis.report_html import write_html_report
+
+    try:
+        print(f"report: {write_html_report(run, vs, written)}")
+    except (FileNotFoundError, DemandMismatch) as exc:
+        print(f"muvsim: no report.html: {exc}", file=sys.stderr)
 
 
 def _version() -> str:
