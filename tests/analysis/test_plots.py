@@ -9,7 +9,7 @@ from bridge.scenarios import run_multi
 
 def test_a_plot_per_kind(tmp_path):
     opts = SimpleNamespace(vclass="paper-a", tm="optimal", check="union", switching="early", disturbance="random",
-                           solver="exact", duration=45.0, vehicles=8, seed=0, log="summary")
+                           solver="exact", duration=30.0, vehicles=8, seed=0, log="summary")
     run_multi("paper10", tmp_path / "a", opts)
     run_multi("paper10", tmp_path / "b", SimpleNamespace(**{**vars(opts), "tm": "greedy", "log": "none"}))
     written = write_plots(tmp_path / "a", tmp_path / "b")

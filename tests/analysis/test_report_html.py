@@ -24,7 +24,7 @@ def test_report_html_in_headless_chromium(tmp_path, capsys):
             pytest.fail("MUVSIM_REQUIRE_BROWSER=1 but no chromium on PATH")
         pytest.skip("no chromium on PATH (apt-get install chromium; .ci/run installs it)")
     out = tmp_path / "run"
-    assert main(["run", "paper10", "--out", str(out), "--duration", "20", "--log", "summary", "--quiet",
+    assert main(["run", "paper10", "--out", str(out), "--duration", "10", "--log", "summary", "--quiet",
                  "--plots"]) == 0
     assert f"report: {out / 'report.html'}" in capsys.readouterr().out
     page = (out / "report.html").read_text(encoding="utf-8")

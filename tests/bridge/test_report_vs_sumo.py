@@ -13,7 +13,7 @@ def test_run_and_report_compare_with_sumo_drivers(grid_net, grid_routes, tmp_pat
     base, run = tmp_path / "base", tmp_path / "run"
     assert main(["run", str(cfg), "--baseline", "sumo", "--out", str(base), "--quiet", "--seed", "3"]) == 0
     capsys.readouterr()
-    assert main(["run", str(cfg), "--out", str(run), "--quiet", "--seed", "3", "--duration", "60",
+    assert main(["run", str(cfg), "--out", str(run), "--quiet", "--seed", "3", "--duration", "30",
                  "--log", "none", "--vs", str(base)]) == 0
     out = capsys.readouterr().out
     s = json.loads((run / "summary.json").read_text())

@@ -52,19 +52,19 @@ def test_cli_refuses_a_duration_that_is_not_positive(bad, tmp_path, capsys):
 
 
 def test_run_without_duration_stops_when_every_vehicle_arrived(grid_net, tmp_path, capsys, monkeypatch):
-    """Real SUMO, 6 vehicles departing within 30 s, no --duration: the run ends at the step the
+    """Real SUMO, 4 vehicles departing within 20 s, no --duration: the run ends at the step the
     last vehicle arrives (not at a fixed time), and the closing table says so as arrived of demand.
     The minimum window is raised to 150 s (cap 450 s) so slow junction waits cannot reach the cap."""
     from sumo_nets.generate import make_demand
 
     monkeypatch.setattr(stopping, "MIN_WINDOW_S", 150.0)
-    routes = make_demand(grid_net, tmp_path, seed=9, vehicles=6, duration_s=30.0,
-                         class_mix={"car": 0.6, "bus": 0.2, "truck": 0.2})
+    routes = make_demand(grid_net, tmp_path, seed=9, vehicles=4, duration_s=20.0,
+                         class_mix={"car": 0.5, "bus": 0.25, "truck": 0.25})
     cfg = write_sumocfg(tmp_path / "small.sumocfg", grid_net, [routes])
     assert main(["run", str(cfg), "--out", str(tmp_path / "out"), "--quiet", "--log", "none", "--seed", "3"]) == 0
     out = capsys.readouterr().out
     s = json.loads((tmp_path / "out" / "summary.json").read_text())
-    assert s["vehicles_arrived"] == s["vehicles_total"] == 6 and s["finished"]
+    assert s["vehicles_arrived"] == s["vehicles_total"] == 4 and s["finished"]
     assert s["collisions_sumo"] == 0 and s["invariant_violations"] == 0
     import pandas as pd
 
@@ -72,8 +72,8 @@ def test_run_without_duration_stops_when_every_vehicle_arrived(grid_net, tmp_pat
     # stopped at the last arrival: within one step (0.1 s) of it, below the cap of 450 s
     assert s["simulated_s"] == pytest.approx(arrivals.max() + 0.1, abs=0.1 + 1e-9)
     assert s["simulated_s"] < CAP_FACTOR * 150.0
-    assert "every vehicle of the demand arrived (6 of 6)" in s["stop_reason"]
-    assert "vehicles_arrived" in out and "6 of 6 (vehicles_total; 100.0 %)" in out
+    assert "every vehicle of the demand arrived (4 of 4)" in s["stop_reason"]
+    assert "vehicles_arrived" in out and "4 of 4 (vehicles_total; 100.0 %)" in out
     assert "None" not in out
 
 
@@ -84,7 +84,7 @@ def test_run_at_the_cap_says_how_many_are_left(grid_net, grid_routes, tmp_path, 
     cfg = write_sumocfg(tmp_path / "mine.sumocfg", grid_net, [grid_routes])
     assert main(["run", str(cfg), "--out", str(tmp_path / "out"), "--quiet", "--log", "none", "--seed", "3"]) == 0
     s = json.loads((tmp_path / "out" / "summary.json").read_text())
-    assert s["steps"] == 151 and s["simulated_s"] == pytest.approx(15.1)
+    assert s["steps"] == 150 and s["simulated_s"] == pytest.approx(15.0)  # 150 steps of 0.1 s
     left = 20 - s["vehicles_arrived"]
     assert left > 0 and s["stop_reason"].startswith("cap reached: 15.0 s")
     assert f"{left} of 20 vehicles still in the network" in s["stop_reason"]
