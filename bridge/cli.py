@@ -77,9 +77,31 @@ def _make_out(out: Path, option: str = "--out") -> str | None:
 MIN_VEHICLES = {"swap": 2, "crossing": 1}
 
 
+def scenario_problem(name: str) -> str | None:
+    """Why ``name`` is not a scenario ``muvsim run`` can run (listing every valid one), or None.
+
+    Checked before anything is written, so a wrong name creates no output folder.
+    """
+    from sumo_nets.scenario import builtin_scenarios
+
+    if name in FREE_PLANE:
+        return None
+    path = Path(name).expanduser()
+    if name.endswith((".toml", ".sumocfg")):
+        return None if path.is_file() else f"scenario file {path} does not exist"
+    if name in builtin_scenarios() or path.is_file():
+        return None
+    return (f"unknown scenario {name!r}; valid: {', '.join(builtin_scenarios())} (SUMO, built in), "
+            f"{', '.join(FREE_PLANE)} (free plane), or the path of a scenario .toml or a SUMO .sumocfg file")
+
+
 def _cmd_run(args) -> int:
     from bridge.scenarios import ScenarioRunError, run_scenario
 
+    problem = scenario_problem(args.scenario)
+    if problem:
+        print(f"muvsim run: {problem}", file=sys.stderr)
+        return 2
     out = Path(args.out)
     if args.scenario in MIN_VEHICLES and args.vehicles < MIN_VEHICLES[args.scenario]:
         print(f"muvsim run: --vehicles: {args.scenario} needs at least {MIN_VEHICLES[args.scenario]} "
@@ -112,21 +134,19 @@ def _cmd_run(args) -> int:
         if getattr(args, "debug", False) and summary.get("traceback"):
             print(summary["traceback"], file=sys.stderr)
         print(f"muvsim run: {summary['error']}", file=sys.stderr)
-    keys = ("scenario", "baseline", "steps", "vehicles", "vehicles_total", "vehicles_arrived", "finished",
-            "collisions_sumo", "collisions_geometric", "invariant_violations", "constraint_violations",
-            "min_separation_m", "stop_commands", "mean_travel_time_s", "mean_delay_s", "throughput_vph",
-            "rtf", "wall_s", "error")
-    width = max(len(k) for k in keys)
-    for k in keys:
-        if k in summary:
-            print(f"{k:<{width}}  {summary[k]}")
+    from analysis.report import SUMMARY_ROWS, format_summary
+
+    print(format_summary(summary))
+    width = max(len(k) for k in SUMMARY_ROWS)
     if (out / "steps.csv").exists() and not summary.get("baseline") == "sumo":
         import pandas as pd
 
         from analysis.kpis import timing_means
 
         ms = timing_means(pd.read_csv(out / "steps.csv"))
-        print("ms per step".ljust(width) + "  " + ", ".join(f"{k[:-3]} {v:.3f}" for k, v in ms.items()))
+        print("wall ms per step".ljust(width) + "  " + ", ".join(f"{k[:-3]} {v:.3f}" for k, v in ms.items()))
+    if getattr(args, "vs", None) and (out / "summary.json").exists():
+        _print_vs(out, Path(args.vs))
     print(f"written: {out / 'summary.json'}")
     if args.plots and (out / "summary.json").exists():
         _write_plots(out)
@@ -141,8 +161,18 @@ def _cmd_run(args) -> int:
     return 0
 
 
+def _print_vs(out: Path, base: Path) -> None:
+    """The closing comparison of ``muvsim run --vs BASE`` (a message, never an exception)."""
+    from analysis.report import DemandMismatch, format_brief_comparison, load_run
+
+    try:
+        print(format_brief_comparison(load_run(out), load_run(base)))
+    except (FileNotFoundError, DemandMismatch) as exc:
+        print(f"muvsim run: no comparison with {base}: {exc}", file=sys.stderr)
+
+
 def _cmd_report(args) -> int:
-    from analysis.report import DemandMismatch, format_report, load_run, report_table
+    from analysis.report import DemandMismatch, format_report, load_run, report_path, report_table
 
     try:
         a = load_run(args.run)
@@ -152,7 +182,7 @@ def _cmd_report(args) -> int:
         print(f"muvsim report: {exc}", file=sys.stderr)
         return 2
     print(format_report(df, a, b))
-    dest = Path(args.run) / "report.csv"
+    dest = report_path(a, b)
     df.to_csv(dest, index=False)
     print(f"written: {dest}")
     if args.plots:
@@ -163,6 +193,10 @@ def _cmd_report(args) -> int:
 def _cmd_sweep(args) -> int:
     from bridge.sweep import SweepSettings, SweepSettingsError, format_table, sweep
 
+    problem = scenario_problem(args.scenario)
+    if problem:
+        print(f"muvsim sweep: {problem}", file=sys.stderr)
+        return 2
     try:
         settings = SweepSettings(
             scenario=args.scenario, seeds=tuple(args.seeds), out=Path(args.out), tm=tuple(args.tm or ()),
@@ -192,10 +226,53 @@ def _write_plots(run: Path, vs: Path | None = None) -> None:
         return
     for kind, path in written.items():
         print(f"plot {kind}: {path}")
+    from analysis.report import DemandMismatch
+    from analysis.report_html import write_html_report
+
+    try:
+        print(f"report: {write_html_report(run, vs, written)}")
+    except (FileNotFoundError, DemandMismatch) as exc:
+        print(f"muvsim: no report.html: {exc}", file=sys.stderr)
+
+
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("muvsim")
+    except PackageNotFoundError:  # pragma: no cover - run from a tree that was never installed
+        return "unknown (not installed)"
+
+
+def _duration(text: str) -> float:
+    """``--duration``: simulated seconds, a finite number > 0."""
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be simulated seconds (a number > 0), got {text!r}") from None
+    if not (v > 0 and v != float("inf")):
+        raise argparse.ArgumentTypeError(f"must be > 0 simulated seconds, got {text!r} (leave --duration out "
+                                         "to run until every vehicle has arrived)")
+    return v
+
+
+DURATION_HELP = ("stop after S simulated seconds, or earlier once every vehicle of the demand has arrived. "
+                 "Default: until every vehicle has arrived, at most 3 x the departure window (the last "
+                 "requested departure, at least 60 s; 900 s for grid); the closing table says why the run "
+                 "stopped and how many vehicles are still in the network")
+
+
+SEED_HELP = ("seed of the run: draws a generated scenario's demand (randomTrips' seed and the class "
+             "assignment) as well as SUMO's seed, the disturbances and the TM's tie-breaks; a .sumocfg's demand "
+             "is its own and does not change. Default: the scenario's seed (0 for free-plane scenarios)")
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="muvsim", description=__doc__.splitlines()[0])
+    p = argparse.ArgumentParser(
+        prog="muvsim", description="muvsim: collision-free co-simulation of automated vehicles (set-theoretic "
+                                   "MPC and a traffic manager) in SUMO city traffic.",
+        epilog="muvsim COMMAND --help describes a command's options.")
+    p.add_argument("--version", action="version", version=f"muvsim {_version()}")
     common = argparse.ArgumentParser(add_help=False)
     common.add_argument("--debug", action="store_true", help="show the Python traceback of an error")
     sub = p.add_subparsers(dest="command", required=True)
@@ -210,7 +287,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="grid (default), grid-large, a scenario .toml, a .sumocfg, or a free-plane "
                         "scenario: single, paper10, swap, crossing")
     r.add_argument("--out", default="runs/latest", help="output directory (default runs/latest)")
-    r.add_argument("--seed", type=int, default=None, help="default: the scenario's seed (0 free-plane)")
+    r.add_argument("--seed", type=int, default=None, help=SEED_HELP)
     r.add_argument("--vclass", default="paper-a", help="vehicle class for single/swap/crossing")
     r.add_argument("--tm", choices=["greedy", "optimal"], default=None, help="default: the scenario's")
     r.add_argument("--check", choices=["union", "timed"], default=None)
@@ -221,12 +298,15 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--gui", action="store_true", help="sumo-gui (needs a display)")
     r.add_argument("--quiet", action="store_true", help="no progress bar")
     r.add_argument("--solver", choices=["exact", "daqp", "proxsuite"], default="exact")
-    r.add_argument("--duration", type=float, default=None, help="simulated seconds (default: until done)")
+    r.add_argument("--duration", type=_duration, default=None, metavar="S", help=DURATION_HELP)
     r.add_argument("--vehicles", type=int, default=8, help="vehicles in swap")
     r.add_argument("--log", choices=["none", "summary", "full"], default="summary",
                    help="run.mcap for Foxglove: none, summary (states, decisions; default) or full "
                         "(+ claim polygons)")
     r.add_argument("--plots", action="store_true", help="write plots into DIR/plots after the run")
+    r.add_argument("--vs", metavar="BASE_DIR", default=None,
+                   help="after the run, compare with this run of the same demand (e.g. a --baseline sumo run): "
+                        "arrivals, per-vehicle ratios over the vehicles both landed, the whole demand censored")
     r.set_defaults(func=_cmd_run)
     q = sub.add_parser("report", parents=[common],
                        help="KPI statistics of a run, or two runs compared (report.csv)")
@@ -241,7 +321,9 @@ def build_parser() -> argparse.ArgumentParser:
                                     "single, paper10, swap, crossing")
     w.add_argument("--out", default="runs/sweep",
                    help="output directory: DIR/<run label>/ per run and DIR/sweep.csv (default runs/sweep)")
-    w.add_argument("--seeds", type=int, nargs="+", required=True, metavar="SEED", help="seeds to run")
+    w.add_argument("--seeds", type=int, nargs="+", required=True, metavar="SEED",
+                   help="seeds to run, each as muvsim run --seed: a generated scenario's demand is drawn anew "
+                        "per seed, so means over seeds are means over traffic (a .sumocfg's demand is fixed)")
     w.add_argument("--tm", choices=["greedy", "optimal"], nargs="+", default=None,
                    help="policies to sweep (default: the scenario's)")
     w.add_argument("--check", choices=["union", "timed"], nargs="+", default=None)
@@ -249,7 +331,9 @@ def build_parser() -> argparse.ArgumentParser:
     w.add_argument("--disturbance", choices=["random", "adversarial", "none"], nargs="+", default=None)
     w.add_argument("--solver", choices=["exact", "daqp", "proxsuite"], nargs="+", default=None,
                    help="default exact")
-    w.add_argument("--duration", type=float, default=None, help="simulated seconds (default: the scenario's)")
+    w.add_argument("--duration", type=_duration, default=None, metavar="S",
+                   help="each run's --duration (as muvsim run: " + DURATION_HELP.split(". ", 1)[0] + "; default: "
+                        "until every vehicle has arrived, at most 3 x the departure window)")
     w.add_argument("--baseline", action="store_true", help="add one --baseline sumo run per seed")
     w.add_argument("--log", choices=["none", "summary", "full"], default="none",
                    help="run.mcap of each run (default none)")

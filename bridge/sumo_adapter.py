@@ -209,8 +209,8 @@ class SumoAdapter:
                    tripinfo_path: str | os.PathLike) -> dict:
         """Run a configuration with SUMO's own drivers (no override): the ``--baseline sumo``.
 
-        Same collision options as :meth:`start`; returns steps, unique collision pairs and
-        the run's simulated seconds.  Raises :class:`SumoError` on SUMO's errors.
+        Same collision options as :meth:`start`; returns steps, unique collision pairs,
+        the run's simulated seconds and the vehicles SUMO loaded (``vehicles_loaded``).  Raises :class:`SumoError` on SUMO's errors.
         """
         mod = self._backend_module()
         errors = self._errors(mod)
@@ -219,13 +219,14 @@ class SumoAdapter:
                 "--collision.mingap-factor", "0", "--tripinfo-output", str(tripinfo_path),
                 "--no-step-log", "true", "--end", str(duration_s)]
         pairs: set = set()
-        steps = 0
+        steps = loaded = 0
         try:
             mod.start(args)
             while mod.simulation.getTime() < duration_s and (
                     steps == 0 or mod.simulation.getMinExpectedNumber() > 0):
                 mod.simulationStep()
                 steps += 1
+                loaded += mod.simulation.getLoadedNumber()
                 for c in mod.simulation.getCollisions():
                     pairs.add(tuple(sorted((c.collider, c.victim))))
         except errors as exc:
@@ -235,7 +236,8 @@ class SumoAdapter:
                 mod.close()
             except errors:
                 pass
-        return {"steps": steps, "collision_pairs": sorted(pairs), "simulated_s": round(steps * 0.1, 3)}
+        return {"steps": steps, "collision_pairs": sorted(pairs), "simulated_s": round(steps * 0.1, 3),
+                "vehicles_loaded": loaded}
 
     def start(self, sumocfg: str | os.PathLike | None = None, *, net: str | os.PathLike | None = None,
               routes: str | os.PathLike | Sequence[str | os.PathLike] | None = None, step_length: float = 0.1,

@@ -16,6 +16,7 @@ import sys
 import time
 import traceback
 import xml.etree.ElementTree as ET
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -28,6 +29,7 @@ from analysis.mcap_log import observers_for
 from analysis.outputs import StreamingOutputs, close_observers, write_run_tables
 from analysis.safety import verdict
 from bridge.scenarios import _write_summary
+from bridge.stopping import route_file_departures, run_limit, stop_reason
 from bridge.sumo_adapter import SumoAdapter, SumoError
 from bridge.waypoints import RouteError, load_net, trim_start
 from controllers.classes import builtin_classes
@@ -161,26 +163,37 @@ def run_sumo(target: str, out: Path, opts) -> dict:
             scenario = None
             cfg = read_sumocfg(target)
             sumocfg, net = cfg.path, cfg.net
-            seed, duration = opts.seed, opts.duration or 300.0
+            seed, routes_in, additional = opts.seed, cfg.routes, cfg.additional
             tm, check, switching, disturbance = (getattr(opts, k) or SUMOCFG_DEFAULTS[k]
                                                  for k in ("tm", "check", "switching", "disturbance"))
         else:
             scenario = load_scenario(target)
+            if opts.seed is not None and scenario.demand is not None:  # --seed draws the demand too
+                scenario = replace(scenario, demand=replace(scenario.demand, seed=opts.seed))
             files = materialise(scenario, out / "inputs")
             sumocfg, net = files.sumocfg, files.net
             seed = scenario.seed if opts.seed is None else opts.seed
-            duration = opts.duration or scenario.duration_s
+            routes_in, additional = files.routes, ()
+            if scenario.demand is not None:
+                summary["demand_seed"] = scenario.demand.seed
             tm = opts.tm or scenario.tm
             check = opts.check or scenario.check
             switching = opts.switching or scenario.switching
             disturbance = opts.disturbance or scenario.disturbance
         summary.update(seed=seed, options=dict(tm=tm, check=check, switching=switching, disturbance=disturbance,
-                                               solver=opts.solver, duration_s=duration))
+                                               solver=opts.solver, duration_s=opts.duration))
         _write_summary(out, summary)
         tripinfo = out / "tripinfo.xml"
         if opts.baseline == "sumo":
-            return _run_baseline(adapter, sumocfg, tripinfo, seed, duration, out, summary, t0)
+            planned = _planned_demand(routes_in, additional)
+            deps = [pv.depart_s for pv in planned.vehicles] if planned is not None \
+                else route_file_departures(routes_in)
+            limit = run_limit(deps, opts.duration)
+            return _run_baseline(adapter, sumocfg, tripinfo, seed, limit, out, summary, t0,
+                                 None if planned is None else len(planned))
         demand = adapter.start(sumocfg, tripinfo_path=tripinfo, seed=seed, gui=opts.gui)
+        limit = run_limit([pv.depart_s for pv in demand.vehicles], opts.duration)
+        duration = limit.duration_s
         classes = builtin_classes()
         cls_of = _classes_for(scenario, demand, classes, source=sumocfg)
         geo = load_net(net)
@@ -240,15 +253,33 @@ def run_sumo(target: str, out: Path, opts) -> dict:
             summary.update(
                 collisions_sumo=len(sim.collisions_world),
                 vehicles_total=figures["vehicles"],
+                stop_reason=stop_reason(limit, figures["vehicles"], figures["vehicles_arrived"],
+                                        figures["simulated_s"]),
                 rtf=round(sim.t * sim.settings.Ts / wall, 3) if wall > 0 else None)
             summary.update(verdict(summary))
         _write_summary(out, summary)
     return summary
 
 
-def _run_baseline(adapter: SumoAdapter, sumocfg, tripinfo, seed, duration, out, summary, t0) -> dict:
-    """The same demand driven by SUMO's own drivers (no muvsim control)."""
-    res = adapter.run_native(sumocfg, duration_s=duration, seed=seed, tripinfo_path=tripinfo)
+def _planned_demand(routes, additional):
+    """The demand of routed route files as muvsim reads it (None for trips/flows or unreadable files)."""
+    from bridge.demand import DemandError, needs_routing, read_demand
+
+    if not routes or needs_routing(routes):
+        return None
+    try:
+        return read_demand(list(routes), type_files=list(additional))
+    except DemandError:
+        return None
+
+
+def _run_baseline(adapter: SumoAdapter, sumocfg, tripinfo, seed, limit, out, summary, t0,
+                  demand_size: int | None = None) -> dict:
+    """The same demand driven by SUMO's own drivers (no muvsim control), until ``limit``.
+
+    ``vehicles_total`` is the demand's size when known (routed route files), else the
+    vehicles SUMO loaded."""
+    res = adapter.run_native(sumocfg, duration_s=limit.duration_s, seed=seed, tripinfo_path=tripinfo)
     wall = time.perf_counter() - t0
     vehicles = baseline_vehicle_table(read_tripinfo(tripinfo),
                                       {c: vc.v_max for c, vc in builtin_classes().items()})
@@ -261,5 +292,10 @@ def _run_baseline(adapter: SumoAdapter, sumocfg, tripinfo, seed, duration, out, 
                    throughput_vph=round(float(arrived.sum()) * 3600.0 / res["simulated_s"], 3)
                    if res["simulated_s"] else None,
                    rtf=round(res["simulated_s"] / wall, 3), wall_s=round(wall, 3))
+    total = demand_size if demand_size is not None else res.get("vehicles_loaded")
+    if total is not None:
+        summary["vehicles_total"] = int(total)
+        summary["stop_reason"] = stop_reason(limit, summary["vehicles_total"], summary["vehicles_arrived"],
+                                             res["simulated_s"])
     _write_summary(out, summary)
     return summary

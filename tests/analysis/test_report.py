@@ -1,6 +1,7 @@
 """``muvsim report``: statistics of a run, two runs compared, runs of different demand refused."""
 
 import json
+import re
 
 import numpy as np
 import pandas as pd
@@ -45,13 +46,19 @@ def test_one_run_statistics(tmp_path):
     assert get("collisions_geometric", "pair_steps") == 0
 
 
+def _own(df):
+    """The 'own arrived' and 'run' rows of a comparison, indexed by (metric, statistic)."""
+    return df[df.over.isin(["own arrived", "run"])].set_index(["metric", "statistic"])
+
+
 def test_report_vs_gives_the_differences_the_tables_imply(tmp_path, capsys):
     a = _run_dir(tmp_path / "a", delays=[1.0, 2.0, 3.0, 4.0], stops=[0, 1, 1, 2])
     b = _run_dir(tmp_path / "b", delays=[2.0, 2.0, 6.0, 6.0], stops=[1, 1, 2, 4], simulated_s=200.0)
     assert main(["report", str(a), "--vs", str(b)]) == 0
     out = capsys.readouterr().out
-    assert "difference" in out and str(b) in out
-    df = pd.read_csv(a / "report.csv").set_index(["metric", "statistic"])
+    assert "difference = run - vs" in out and str(b) in out and "warning" not in out  # same arrivals
+    assert not (a / "report.csv").exists()  # --vs writes its own file, never report.csv
+    df = _own(pd.read_csv(a / "report_vs_b.csv"))
     assert df.loc[("delay_s", "mean"), "run"] == pytest.approx(2.5)
     assert df.loc[("delay_s", "mean"), "vs"] == pytest.approx(4.0)
     assert df.loc[("delay_s", "mean"), "difference"] == pytest.approx(-1.5)
@@ -61,6 +68,68 @@ def test_report_vs_gives_the_differences_the_tables_imply(tmp_path, capsys):
     assert df.loc[("travel_time_s", "mean"), "difference"] == pytest.approx(12.5 - 14.0)
     # same arrivals in half the time: twice the throughput
     assert df.loc[("throughput_vph", "value"), "ratio"] == pytest.approx(2.0)
+    assert ("collisions_sumo", "pairs") in df.index and ("collisions_world", "pairs") not in df.index
+
+
+def test_paired_rows_compare_vehicle_by_vehicle(tmp_path):
+    """Paired statistics are statistics of the per-vehicle ratio and difference, over the vehicles
+    both runs landed; a vehicle only one run landed is left out of them."""
+    a = _run_dir(tmp_path / "a", delays=[1.0, 2.0, 3.0, 4.0], stops=[0, 1, 1, 2])
+    b = _run_dir(tmp_path / "b", delays=[2.0, 2.0, 6.0, 6.0], stops=[1, 1, 2, 4])
+    v = pd.read_csv(b / "vehicles.csv")
+    v.loc[3, ["arrival_s", "travel_time_s", "delay_s"]] = np.nan  # b did not land v3
+    v.to_csv(b / "vehicles.csv", index=False)
+    df = report_table(load_run(a), load_run(b))
+    p = df[df.over == "paired"].set_index(["metric", "statistic"])
+    assert p.loc[("vehicles_paired", "count"), "run"] == 3
+    ta, tb = np.array([11.0, 12.0, 13.0]), np.array([12.0, 12.0, 16.0])
+    # tolerance: float64 arithmetic on a handful of numbers (1e-12 relative)
+    for st, f in (("mean", np.mean), ("median", np.median), ("p95", lambda x: np.percentile(x, 95))):
+        assert p.loc[("travel_time_s", st), "ratio"] == pytest.approx(f(ta / tb), rel=1e-12)
+        assert p.loc[("travel_time_s", st), "difference"] == pytest.approx(f(ta - tb), rel=1e-12)
+        assert p.loc[("travel_time_s", st), "run"] == pytest.approx(f(ta), rel=1e-12)
+    assert (p.loc[("travel_time_s", "mean"), "n"]) == 3
+
+
+def test_whole_demand_counts_unfinished_vehicles_with_their_time_so_far(tmp_path, capsys):
+    """A vehicle not arrived counts with (end of its run - requested departure), marked censored;
+    the arrived sets differing by more than 5 % prints a warning."""
+    a = _run_dir(tmp_path / "a", delays=[1.0, 2.0, 3.0, 4.0], stops=[0, 1, 1, 2], simulated_s=100.0)
+    b = _run_dir(tmp_path / "b", delays=[2.0, 2.0, 6.0, 6.0], stops=[1, 1, 2, 4], simulated_s=50.0)
+    v = pd.read_csv(b / "vehicles.csv")
+    v.loc[[2, 3], ["arrival_s", "travel_time_s", "delay_s"]] = np.nan  # b left v2, v3 in the network
+    v.to_csv(b / "vehicles.csv", index=False)
+    assert main(["report", str(a), "--vs", str(b)]) == 0
+    out = capsys.readouterr().out
+    assert "warning: the runs landed different vehicles (run 4, vs 2, both 2; 2 of 4 = 50.0 %" in out
+    df = pd.read_csv(a / "report_vs_b.csv")
+    d = df[df.over == "demand (censored)"].set_index(["metric", "statistic"])
+    assert (d.loc[("vehicles_censored", "count"), "run"], d.loc[("vehicles_censored", "count"), "vs"]) == (0, 2)
+    journey_a = np.array([11.0, 12.0, 13.0, 14.0])        # arrival - departure, all arrived
+    journey_b = np.array([12.0, 12.0, 50.0 - 2.0, 50.0 - 3.0])  # v2, v3 censored at the run's end (50 s)
+    assert d.loc[("journey_time_s", "mean"), "run"] == pytest.approx(journey_a.mean())
+    assert d.loc[("journey_time_s", "mean"), "vs"] == pytest.approx(journey_b.mean())
+    assert d.loc[("journey_time_s", "median"), "ratio"] == pytest.approx(np.median(journey_a / journey_b))
+
+
+def test_report_without_vs_has_no_comparison_header(tmp_path, capsys):
+    a = _run_dir(tmp_path / "a", delays=[1.0, 2.0], stops=[0, 1])
+    assert main(["report", str(a)]) == 0
+    out = capsys.readouterr().out
+    assert "difference" not in out and "ratio" not in out and "None" not in out
+    # rounded to meaning: seconds to 0.1, counts whole
+    assert re.search(r"\ndelay_s +mean +1\.5\n", out) and re.search(r"\ntravel_time_s +p95 +11\.9\n", out)
+    assert re.search(r"\nvehicles_arrived +count +2\n", out) and re.search(r"\nthroughput_vph +value +72\n", out)
+
+
+def test_report_says_no_vehicle_arrived_instead_of_nan(tmp_path, capsys):
+    a = _run_dir(tmp_path / "a", delays=[1.0, 2.0], stops=[0, 1])
+    v = pd.read_csv(a / "vehicles.csv")
+    v[["arrival_s", "travel_time_s", "delay_s"]] = np.nan
+    v.to_csv(a / "vehicles.csv", index=False)
+    assert main(["report", str(a)]) == 0
+    out = capsys.readouterr().out
+    assert "no vehicle arrived" in out and "nan" not in out.lower() and "None" not in out
 
 
 def test_runs_of_different_demand_are_refused(tmp_path, capsys):
@@ -86,7 +155,7 @@ def test_baseline_run_is_read_from_tripinfo(tmp_path):
         f'routeLength="138.90" timeLoss="2.00" waitingTime="1.00" waitingCount="1" vType="DEFAULT_VEHTYPE"/>'
         for i in range(2))
     (base / "tripinfo.xml").write_text(f"<tripinfos>{trips}</tripinfos>")
-    df = report_table(load_run(a), load_run(base)).set_index(["metric", "statistic"])
+    df = _own(report_table(load_run(a), load_run(base)))
     assert df.loc[("travel_time_s", "mean"), "vs"] == pytest.approx(12.0)
     assert df.loc[("delay_s", "mean"), "vs"] == pytest.approx(12.0 - 138.9 / 13.89)
     assert df.loc[("halt_episodes", "mean"), "vs"] == pytest.approx(1.0)

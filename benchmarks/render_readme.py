@@ -1,0 +1,109 @@
+"""Render the README's benchmark tables from the benchmarks' CSV files: one source per figure.
+
+Usage::
+
+    python benchmarks/render_readme.py          # rewrite the tables in README.md
+    python benchmarks/render_readme.py --check  # exit 1 when README.md differs from the CSV files
+
+Each table sits in README.md between ``<!-- table:NAME -->`` and ``<!-- /table:NAME -->``;
+everything between the markers is generated (edit the CSV by re-running the benchmark, never
+the README table).  Tables:
+
+* ``traffic``: ``benchmarks/results/traffic.csv`` (``bench_traffic.py``), one row per combination;
+* ``scale``: ``benchmarks/results/scale.csv`` (``bench_scale.py``), wall seconds per simulated
+  second by component.
+
+Figures are rounded to their meaning (s to 0.1, counts whole, ratios to 0.01 or as measured).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import re
+import sys
+from pathlib import Path
+
+import pandas as pd
+
+ROOT = Path(__file__).resolve().parents[1]
+RESULTS = ROOT / "benchmarks" / "results"
+
+
+def _f(v, digits: int) -> str:
+    if v is None or (isinstance(v, float) and math.isnan(v)):
+        return "-"
+    return f"{float(v):.{digits}f}"
+
+
+def _count(v) -> str:
+    """A count, or a mean of counts over seeds (one decimal when not whole)."""
+    if v is None or (isinstance(v, float) and math.isnan(v)):
+        return "-"
+    v = float(v)
+    return f"{v:.0f}" if v == round(v) else f"{v:.1f}"
+
+
+def traffic_table(csv: Path = RESULTS / "traffic.csv") -> str:
+    df = pd.read_csv(csv)
+    head = ("| driver | switching | check | policy | seeds | arrived | delay mean / p95 (s) | halts per vehicle "
+            "| time halted (s) | TM stops | collisions (SUMO / geometric) |")
+    lines = [head, "| " + " | ".join(["---"] * 11) + " |"]
+    for _, r in df.iterrows():
+        driver = "SUMO's drivers" if r["driver"] == "sumo" else r["driver"]
+        lines.append(f"| {driver} | {r['switching']} | {r['check']} | {r['policy']} | {int(r['seeds'])} | "
+                     f"{_count(r['arrived'])} | {_f(r['delay_mean_s'], 1)} / {_f(r['delay_p95_s'], 1)} | "
+                     f"{_f(r['halts_per_vehicle'], 1)} | {_f(r['time_halted_s'], 1)} | {_count(r['tm_stops'])} | "
+                     f"{_count(r['collisions_sumo'])} / {_count(r['collisions_geometric'])} |")
+    return "\n".join(lines)
+
+
+def scale_table(csv: Path = RESULTS / "scale.csv") -> str:
+    df = pd.read_csv(csv)
+    head = ("| vehicles (target / mean active) | SUMO | controllers | TM | monitor | logging | other | rtf "
+            "| wall vs SUMO | peak RSS |")
+    lines = [head, "| " + " | ".join(["---"] * 10) + " |"]
+    for _, r in df.iterrows():
+        parts = [f"{int(r['target'])} / {r['active_mean']:.0f}"]
+        parts += [f"{r[c + '_s_per_sim_s']:.3f}" for c in ("sumo", "controllers", "tm", "monitor", "logging",
+                                                           "other")]
+        parts += [f"{r['rtf_window']:.2f}", f"{r['wall_ratio']:.1f} ×", f"{r['peak_rss_mb']:.0f} MB"]
+        lines.append("| " + " | ".join(parts) + " |")
+    return "\n".join(lines)
+
+
+TABLES = {"traffic": traffic_table, "scale": scale_table}
+
+
+def render(text: str) -> str:
+    """``text`` (README.md) with every marked table regenerated."""
+    for name, make in TABLES.items():
+        pat = re.compile(rf"(<!-- table:{name} -->\n).*?(\n<!-- /table:{name} -->)", re.S)
+        if not pat.search(text):
+            raise SystemExit(f"README.md: no <!-- table:{name} --> ... <!-- /table:{name} --> markers")
+        text = pat.sub(lambda m: m.group(1) + make() + m.group(2), text)
+    return text
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--check", action="store_true", help="only check; exit 1 when README.md is out of date")
+    ap.add_argument("--readme", default=str(ROOT / "README.md"))
+    args = ap.parse_args(argv)
+    path = Path(args.readme)
+    old = path.read_text(encoding="utf-8")
+    new = render(old)
+    if args.check:
+        if new != old:
+            print(f"{path}: tables differ from benchmarks/results/*.csv; run python benchmarks/render_readme.py",
+                  file=sys.stderr)
+            return 1
+        print(f"{path}: tables match benchmarks/results/*.csv")
+        return 0
+    path.write_text(new, encoding="utf-8")
+    print(f"written: {path}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
