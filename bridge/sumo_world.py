@@ -243,7 +243,9 @@ def run_sumo(target: str, out: Path, opts) -> dict:
         for pv in demand.vehicles:
             c = cls_of[pv.id]
             try:
-                r = geo.route(pv.edges, classes[c].model.delta, vclass=pv.vclass, vehicle_id=pv.id)
+                m = classes[c].model
+                r = geo.route(pv.edges, m.delta, vclass=pv.vclass, vehicle_id=pv.id,
+                              turn_max_deg=m.turn_max_deg if m.frame == "road" else None)
                 # depart with the whole body on the first lane (SUMO's departPos="base"), not
                 # with its back half in the junction behind it
                 W = trim_start(r, 0.5 * classes[c].length + DEPART_CLEARANCE_M)

@@ -164,24 +164,55 @@ def test_random_flow_departures_equal_the_baselines(kinds_net, tmp_path):
     assert [(v.id, v.depart_s) for v in other.vehicles] != [(v.id, v.depart_s) for v in demand.vehicles]
 
 
-def test_an_undrivable_vehicle_is_reported_and_the_others_arrive(tmp_path):
-    """A route with right-angle kinks 2 m apart inside one edge (sharper than the class accepts)
-    is reported in vehicles.csv and summary.json; the vehicles on the straight road arrive."""
-    (tmp_path / "n.nod.xml").write_text('<nodes><node id="a" x="0" y="0"/><node id="b" x="200" y="0"/>'
-                                        '<node id="c" x="0" y="60"/><node id="d" x="200" y="60"/></nodes>')
-    (tmp_path / "n.edg.xml").write_text(
-        '<edges><edge id="ab" from="a" to="b" numLanes="1" speed="13.89"/>'
-        '<edge id="cd" from="c" to="d" numLanes="1" speed="13.89" '
-        'shape="0,60 100,60 100,62 98,62 98,64 200,64 200,60"/></edges>')
-    net = tmp_path / "n.net.xml"
-    run_tool([sumo_home() / "bin" / "netconvert", "-n", tmp_path / "n.nod.xml", "-e", tmp_path / "n.edg.xml", "-o", net],
+def _net(d: Path, nodes: str, edges: str) -> Path:
+    (d / "n.nod.xml").write_text(f"<nodes>{nodes}</nodes>")
+    (d / "n.edg.xml").write_text(f"<edges>{edges}</edges>")
+    net = d / "n.net.xml"
+    run_tool([sumo_home() / "bin" / "netconvert", "-n", d / "n.nod.xml", "-e", d / "n.edg.xml", "-o", net],
              what="netconvert")
+    return net
+
+
+_NODES = ('<node id="a" x="0" y="0"/><node id="b" x="200" y="0"/>'
+          '<node id="c" x="0" y="60"/><node id="d" x="200" y="60"/>')
+
+
+def test_kinked_route_and_u_turn_are_driven(tmp_path):
+    """Right-angle kinks 2 m apart inside one edge (sharper than the class's 45 deg) and a U-turn
+    through a junction's turnaround: corners are cut so no segment turns more than the class
+    accepts, and the vehicles arrive, with no SUMO collision."""
+    net = _net(tmp_path, _NODES,
+               '<edge id="ab" from="a" to="b" numLanes="1" speed="13.89"/>'
+               '<edge id="ba" from="b" to="a" numLanes="1" speed="13.89"/>'
+               '<edge id="cd" from="c" to="d" numLanes="1" speed="13.89" '
+               'shape="0,60 100,60 100,62 98,62 98,64 200,64 200,60"/>')
     rou = tmp_path / "r.rou.xml"
     rou.write_text('<routes><vehicle id="kinked" depart="0"><route edges="cd"/></vehicle>'
+                   '<vehicle id="uturn" depart="0"><route edges="ab ba"/></vehicle></routes>')
+    rc, s = _run(_cfg(tmp_path / "u.sumocfg", net, routes=[rou], end=200), tmp_path / "m")
+    assert rc == 0 and s["complete"], s.get("error")
+    assert s["vehicles_undrivable"] == 0 and s["vehicles_arrived"] == 2 and s["collisions_sumo"] == 0
+    assert s["invariant_violations"] == 0
+
+
+def test_an_undrivable_vehicle_is_reported_and_the_others_arrive(tmp_path):
+    """A lane that reverses on the spot (a 179 deg vertex: no corner to cut; netconvert would
+    smooth it, so the test writes it into the network) is reported in vehicles.csv and
+    summary.json; the vehicles on the straight road arrive."""
+    net = _net(tmp_path, _NODES,
+               '<edge id="ab" from="a" to="b" numLanes="1" speed="13.89"/>'
+               '<edge id="cd" from="c" to="d" numLanes="1" speed="13.89"/>')
+    text = net.read_text()
+    i = text.index('<lane id="cd_0"')
+    j = text.index('shape="', i) + len('shape="')
+    k = text.index('"', j)
+    net.write_text(text[:j] + "0.00,58.40 120.00,58.40 60.00,59.40 200.00,58.40" + text[k:])
+    rou = tmp_path / "r.rou.xml"
+    rou.write_text('<routes><vehicle id="reverses" depart="0"><route edges="cd"/></vehicle>'
                    '<route id="s" edges="ab"/><flow id="ok" begin="0" end="10" number="2" route="s"/></routes>')
-    rc, s = _run(_cfg(tmp_path / "u.sumocfg", net, routes=[rou], end=120), tmp_path / "m")
+    rc, s = _run(_cfg(tmp_path / "u.sumocfg", net, routes=[rou], end=150), tmp_path / "m")
     assert rc == 0 and s["complete"], s.get("error")
     assert s["vehicles_undrivable"] == 1 and s["vehicles_arrived"] == 2 and s["vehicles_total"] == 3
     v = pd.read_csv(tmp_path / "m" / "vehicles.csv").set_index("id")
-    assert v.loc["kinked", "status"] == "undrivable" and "turns by" in v.loc["kinked", "reason"]
+    assert v.loc["reverses", "status"] == "undrivable" and "turns by" in v.loc["reverses", "reason"]
     assert (v.loc[["ok.0", "ok.1"], "status"] == "driven").all()
