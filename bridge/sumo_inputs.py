@@ -26,8 +26,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterable, Sequence
 
-__all__ = ["InputError", "PreparedInputs", "parse_xml", "prepare_inputs", "OUTPUT_ELEMENTS",
-           "DEMAND_ELEMENTS"]
+__all__ = ["InputError", "PreparedInputs", "parse_xml", "prepare_inputs", "headless_config", "OUTPUT_ELEMENTS",
+           "DEMAND_ELEMENTS", "INPUT_OPTIONS"]
 
 #: Additional-file elements that only write outputs (dropped from muvsim's copies).
 OUTPUT_ELEMENTS = frozenset({
@@ -36,6 +36,11 @@ OUTPUT_ELEMENTS = frozenset({
     "tazRelation"})
 #: Elements that carry vehicles (muvsim inserts those itself).
 DEMAND_ELEMENTS = frozenset({"vehicle", "trip", "flow"})
+
+
+#: Configuration options naming input files (resolved against the configuration's directory).
+INPUT_OPTIONS = frozenset({"net-file", "n", "route-files", "r", "additional-files", "a", "weight-files", "w",
+                           "load-state", "mesosim-edgetype-files"})
 
 
 class InputError(ValueError):
@@ -114,3 +119,29 @@ def prepare_inputs(routes: Sequence[Path], additional: Sequence[Path], work_dir:
                    for i, p in enumerate(additional))
     nd_routes = tuple(_filtered(p, name(i, p, "rou_nodemand"), DEMAND_ELEMENTS) for i, p in enumerate(routes))
     return PreparedInputs(tuple(Path(p) for p in routes), exp_add, nd_routes, nd_add)
+
+
+def headless_config(sumocfg: str | os.PathLike, dest: str | os.PathLike) -> Path:
+    """A copy of a configuration that plain ``sumo`` (and libsumo) loads: its ``<gui_only>``
+    section dropped (``osg-view`` makes ``sumo -c bs3d.sumocfg`` fail: "No option with the
+    name 'osg-view' exists"), input file names made absolute (so the copy finds them), other
+    relative names (outputs) left relative: they land next to the copy, not the scenario's.
+
+    Raises
+    ------
+    InputError
+        The configuration cannot be read.
+    """
+    src = Path(sumocfg).resolve()
+    tree = parse_xml(src)
+    root = tree.getroot()
+    for gui in [e for e in root if e.tag == "gui_only"]:
+        root.remove(gui)
+    for elem in root.iter():
+        if elem.tag in INPUT_OPTIONS and elem.get("value"):
+            names = [v for v in elem.get("value").replace(",", " ").split() if v]
+            elem.set("value", ",".join(str((src.parent / Path(n).expanduser()).resolve()) for n in names))
+    out = Path(dest)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tree.write(out, encoding="utf-8", xml_declaration=True)
+    return out

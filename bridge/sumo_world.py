@@ -27,8 +27,8 @@ from analysis.mcap_log import observers_for
 from analysis.outputs import close_observers, write_run_tables
 from bridge.scenarios import _write_summary
 from bridge.sumo_adapter import SumoAdapter, SumoError
-from bridge.sumo_inputs import InputError, parse_xml, prepare_inputs
-from bridge.waypoints import RouteError, load_net, trim_start
+from bridge.sumo_inputs import InputError, headless_config, parse_xml, prepare_inputs
+from bridge.waypoints import RouteError, load_net, trim_start, trim_start_index
 from controllers.classes import VehicleClass, VTypeParams, builtin_classes, vtype_class
 from controllers.tolerances import HOLD_TOL_M, HOLD_TOL_RAD
 from tm.settings import TMSettings
@@ -196,7 +196,9 @@ def run_sumo(target: str, out: Path, opts) -> dict:
         if str(target).endswith(".sumocfg"):
             scenario = None
             cfg = read_sumocfg(target)
-            sumocfg, net = cfg.path, cfg.net
+            # a copy plain sumo loads (no gui-only options); opened with the GUI as it is
+            sumocfg = cfg.path if opts.gui else headless_config(cfg.path, out / "inputs" / cfg.path.name)
+            net = cfg.net
             # the configuration's own seed, begin and end, as plain `sumo -c` runs it
             seed = cfg.run_seed if opts.seed is None else opts.seed
             begin = cfg.begin_s
@@ -248,13 +250,16 @@ def run_sumo(target: str, out: Path, opts) -> dict:
                               turn_max_deg=m.turn_max_deg if m.frame == "road" else None)
                 # depart with the whole body on the first lane (SUMO's departPos="base"), not
                 # with its back half in the junction behind it
-                W = trim_start(r, 0.5 * classes[c].length + DEPART_CLEARANCE_M)
+                s0 = 0.5 * classes[c].length + DEPART_CLEARANCE_M
+                W = trim_start(r, s0)
                 _check_drivable(pv.id, W, classes[c])
+                limits = geo.speed_limits(r)[trim_start_index(r, s0)]
             except RouteError as exc:  # one vehicle never ends the run: reported, the rest run
                 undrivable[pv.id] = (pv, str(exc))
                 continue
             routes[pv.id] = r
-            specs.append(VehicleSpec(id=pv.id, vclass=c, waypoints=W, depart_s=pv.depart_s - begin))
+            specs.append(VehicleSpec(id=pv.id, vclass=c, waypoints=W, depart_s=pv.depart_s - begin,
+                                     speed_limits=limits))
         summary["vehicles_undrivable"] = len(undrivable)
         world = SumoWorld(adapter, {pv.id: pv for pv in demand.vehicles if pv.id in routes}, routes)
         settings = CosimSettings(tm=TMSettings(policy=tm, check=check, seed=seed), switching=switching,

@@ -356,6 +356,14 @@ class NetGeometry:
         """Whether the network has this (non-internal) edge."""
         return self._net.hasEdge(edge_id)
 
+    def lane_speed(self, lane_id: str) -> float:
+        """A lane's speed limit (m/s), internal lanes included."""
+        return float(self._net.getLane(lane_id).getSpeed())
+
+    def speed_limits(self, route: "RouteWaypoints") -> np.ndarray:
+        """The speed limit of the lane under each waypoint of ``route`` (m/s, (K,))."""
+        return np.array([self.lane_speed(lane) for lane in route.lane_ids], dtype=float)
+
     def lane_count(self, edge_id: str) -> int:
         """Number of lanes of an edge."""
         return self._net.getEdge(edge_id).getLaneNumber()
@@ -404,8 +412,8 @@ class NetGeometry:
             conns.append(cs)
         return conns
 
-    def _choose(self, edges: Sequence[str], conns: list[list[_Conn]], depart_lane: int | None
-                ) -> tuple[int, list[_Conn]]:
+    def _choose(self, edges: Sequence[str], conns: list[list[_Conn]], depart_lane: int | None,
+                vclass: str | None = None) -> tuple[int, list[_Conn]]:
         """Fewest lane changes over the route: (arrival lane on the first edge, connection per junction)."""
         m = len(edges)
         n_last = self.lane_count(edges[-1])
@@ -423,8 +431,9 @@ class NetGeometry:
             choice.insert(0, choice_k)
         if depart_lane is None:
             # free start: the lane of the cheapest first connection (no change needed on edge 0)
-            if m == 1:
-                a0 = 0
+            if m == 1:  # the lowest lane the vClass may use (lane 0 is often a sidewalk)
+                a0 = next((i for i in range(n_last) if vclass is None or
+                           self._net.getEdge(edges[0]).getLane(i).allows(vclass)), 0)
             else:
                 a0 = min(conns[0], key=lambda c: (best[1][c.to_lane], c.from_lane, c.to_lane)).from_lane
         else:
@@ -479,7 +488,7 @@ class NetGeometry:
         if depart_lane is not None and not 0 <= depart_lane < self.lane_count(edges[0]):
             raise RouteError(f"{who}: depart lane {depart_lane} does not exist on edge {edges[0]!r} "
                              f"(lanes 0..{self.lane_count(edges[0]) - 1})")
-        arrive, path = self._choose(edges, conns, depart_lane)
+        arrive, path = self._choose(edges, conns, depart_lane, vclass)
 
         pieces: list[tuple[np.ndarray, str, bool]] = []  # (points, lane id, on its centre line)
         lanes_used = []
@@ -548,6 +557,14 @@ def load_net(net_path: str | os.PathLike) -> NetGeometry:
     except OSError as exc:
         raise FileNotFoundError(f"SUMO network {p} cannot be read: {exc.strerror or exc}") from None
     return _load_net_cached(str(p), st.st_mtime_ns, st.st_size)
+
+
+def trim_start_index(route: "RouteWaypoints", s0: float) -> np.ndarray:
+    """Indices into ``route.waypoints`` of the points :func:`trim_start` returns (its first
+    point, inside the segment ending at the first kept waypoint, takes that segment's start)."""
+    s0 = float(min(max(s0, 0.0), 0.5 * route.length_m))
+    keep = np.flatnonzero(route.arc_length > s0 + 1e-6)
+    return np.concatenate([[max(int(keep[0]) - 1, 0) if len(keep) else route.count - 1], keep])
 
 
 def trim_start(route: "RouteWaypoints", s0: float) -> np.ndarray:

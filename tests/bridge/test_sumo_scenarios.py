@@ -9,6 +9,7 @@ import json
 import shutil
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import pytest
 
@@ -216,3 +217,26 @@ def test_an_undrivable_vehicle_is_reported_and_the_others_arrive(tmp_path):
     v = pd.read_csv(tmp_path / "m" / "vehicles.csv").set_index("id")
     assert v.loc["reverses", "status"] == "undrivable" and "turns by" in v.loc["reverses", "reason"]
     assert (v.loc[["ok.0", "ok.1"], "status"] == "driven").all()
+
+
+def test_lane_speed_limits_and_permissions_reach_the_vehicle(tmp_path):
+    """Each waypoint carries the speed limit of its lane (8 then 20 m/s here); a one-edge route
+    of a passenger car starts on the first lane it may use, not the sidewalk (lane 0)."""
+    from bridge.waypoints import load_net
+
+    net = _net(tmp_path, '<node id="a" x="0" y="0"/><node id="b" x="100" y="0"/><node id="c" x="300" y="0"/>',
+               '<edge id="ab" from="a" to="b" numLanes="2" speed="8" sidewalkWidth="2"/>'
+               '<edge id="bc" from="b" to="c" numLanes="2" speed="20" sidewalkWidth="2"/>')
+    geo = load_net(net)
+    r = geo.route(["ab", "bc"], 3.0, vclass="passenger")
+    lim = geo.speed_limits(r)
+    on_ab = np.array([lane.startswith("ab_") for lane in r.lane_ids])
+    on_bc = np.array([lane.startswith("bc_") for lane in r.lane_ids])
+    assert on_ab.any() and on_bc.any()
+    assert np.all(lim[on_ab] == 8.0) and np.all(lim[on_bc] == 20.0)
+    one = geo.route(["bc"], 3.0, vclass="passenger")
+    assert one.depart_lane_index == 1 and all(lane == "bc_1" for lane in one.lane_ids)
+    rou = tmp_path / "r.rou.xml"
+    rou.write_text('<routes><vehicle id="v" depart="0"><route edges="bc"/></vehicle></routes>')
+    rc, s = _run(_cfg(tmp_path / "s.sumocfg", net, routes=[rou], end=100), tmp_path / "m")
+    assert rc == 0 and s["vehicles_arrived"] == 1 and s["collisions_sumo"] == 0
