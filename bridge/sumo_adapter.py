@@ -249,8 +249,9 @@ class SumoAdapter:
 
         SUMO runs the configuration (its own parser: gzip, route and additional files,
         flows, ``probability`` and ``exp(...)`` draws, vType and route distributions, all
-        with ``seed``) and every vehicle is removed the moment SUMO loads or inserts it, so the
-        network stays empty and each one departs at its requested time.  Recorded per vehicle:
+        with ``seed``) and every vehicle is removed the moment SUMO inserts it, so the
+        network stays empty and each one departs at its requested time (one SUMO cannot
+        insert even then keeps the route it was loaded with).  Recorded per vehicle:
         id, vType (the one drawn from a distribution), route (as routed by SUMO for trips)
         and requested departure (``depart - departDelay``).  vTypes are read back with
         ``vehicletype.get*`` (SUMO's defaults per vClass for what a vType leaves out).
@@ -283,12 +284,11 @@ class SumoAdapter:
                 now = sim.getTime()
                 departed = list(sim.getDepartedIDList())
                 now_departed = set(departed)
-                for v in sim.getLoadedIDList():
-                    if v not in now_departed:  # waiting: requested = now - delay so far
+                for v in sim.getLoadedIDList():  # loaded (possibly ahead of time): requested = now - delay
+                    if v not in now_departed:
                         seen[v] = [round(now - veh.getDepartDelay(v), 6), veh.getTypeID(v), tuple(veh.getRoute(v)),
                                    len(seen)]
-                        veh.remove(v, _REMOVE_VAPORIZED)
-                for v in departed:
+                for v in departed:  # the route as SUMO routed it (trips), then out of the network
                     seen[v] = [round(veh.getDeparture(v) - veh.getDepartDelay(v), 6), veh.getTypeID(v),
                                tuple(veh.getRoute(v)), seen[v][3] if v in seen else len(seen)]
                     veh.remove(v, _REMOVE_VAPORIZED)
