@@ -240,3 +240,19 @@ def test_lane_speed_limits_and_permissions_reach_the_vehicle(tmp_path):
     rou.write_text('<routes><vehicle id="v" depart="0"><route edges="bc"/></vehicle></routes>')
     rc, s = _run(_cfg(tmp_path / "s.sumocfg", net, routes=[rou], end=100), tmp_path / "m")
     assert rc == 0 and s["vehicles_arrived"] == 1 and s["collisions_sumo"] == 0
+
+
+def test_trips_loaded_ahead_get_the_route_sumo_computes(tmp_path):
+    """A <trip> (origin and destination only) loaded long before its departure: the demand has
+    the route SUMO routed for it, not its two end edges."""
+    net = _net(tmp_path, '<node id="a" x="0" y="0"/><node id="b" x="100" y="0"/><node id="c" x="200" y="0"/>'
+                         '<node id="d" x="300" y="0"/>',
+               '<edge id="ab" from="a" to="b" speed="13.89"/><edge id="bc" from="b" to="c" speed="13.89"/>'
+               '<edge id="cd" from="c" to="d" speed="13.89"/>')
+    rou = tmp_path / "r.rou.xml"
+    rou.write_text('<routes><trip id="t" depart="40" from="ab" to="cd"/></routes>')
+    c = read_sumocfg(_cfg(tmp_path / "t.sumocfg", net, routes=[rou]))
+    inputs = prepare_inputs(c.routes, c.additional, tmp_path / "in")
+    d = SumoAdapter().expand_demand(c.path, inputs, begin_s=0.0, end_s=60.0, seed=1, step_length=0.5,
+                                    work_dir=tmp_path / "in")
+    assert [(v.id, v.depart_s, v.edges) for v in d.vehicles] == [("t", 40.0, ("ab", "bc", "cd"))]
