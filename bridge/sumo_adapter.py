@@ -81,6 +81,10 @@ __all__ = ["SumoError", "CollisionEvent", "VehicleInfo", "SumoAdapter"]
 BACKENDS = ("libsumo", "traci")
 _REMOVE_ARRIVED = 2  # libsumo/traci constants.REMOVE_ARRIVED
 _REMOVE_VAPORIZED = 3  # libsumo/traci constants.REMOVE_VAPORIZED
+#: SUMO's desiredMaxSpeed of bicycles (``DEFAULT_BICYCLE_SPEED``, 20 km/h): their vType's maxSpeed
+#: is 50 km/h, but SUMO drives them at most 20 km/h x speedFactor (measured: 5.89 m/s = 5.56 x 1.06
+#: alone on a 13.89 m/s road).  libsumo has no getter for desiredMaxSpeed; a vType's own one is not read.
+BICYCLE_DESIRED_MAX_SPEED = 20.0 / 3.6
 
 
 class SumoError(RuntimeError):
@@ -295,9 +299,13 @@ class SumoAdapter:
             vt = mod.vehicletype
             types = {}
             for tid in sorted({r[1] for r in seen.values()}):
-                types[tid] = VehicleType(tid, vt.getVehicleClass(tid), float(vt.getLength(tid)),
-                                         float(vt.getWidth(tid)), "", accel=float(vt.getAccel(tid)),
-                                         decel=float(vt.getDecel(tid)), max_speed=float(vt.getMaxSpeed(tid)))
+                vclass = vt.getVehicleClass(tid)
+                vmax = float(vt.getMaxSpeed(tid))
+                if vclass == "bicycle":
+                    vmax = min(vmax, BICYCLE_DESIRED_MAX_SPEED)
+                types[tid] = VehicleType(tid, vclass, float(vt.getLength(tid)), float(vt.getWidth(tid)), "",
+                                         accel=float(vt.getAccel(tid)), decel=float(vt.getDecel(tid)),
+                                         max_speed=vmax)
         except errors as exc:
             raise SumoError(f"SUMO failed expanding the demand of {sumocfg}: {exc}") from None
         finally:
