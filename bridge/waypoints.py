@@ -45,6 +45,7 @@ __all__ = [
     "point_polyline_distance",
     "drop_slivers",
     "round_corners",
+    "refine_turns",
     "LANE_CHANGE_M",
     "MIN_SEGMENT_M",
     "CHAMFER_M",
@@ -256,6 +257,30 @@ def round_corners(poly: np.ndarray, lanes: list, on: list, max_turn_deg: float, 
                 no.append(on[j - 1])
         poly, lanes, on = np.asarray(pts), nl, no
     return poly, lanes, on
+
+
+def refine_turns(poly: np.ndarray, wps: np.ndarray, arc: np.ndarray, max_turn_deg: float, passes: int = 8
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """Denser waypoints where the chords between them turn more than ``max_turn_deg``.
+
+    A chord across a curve turns by about its length over the curve's radius (3 m chords on
+    a 3.8 m turnaround: 45 deg), even when no polyline vertex turns that much.  At every
+    waypoint whose two chords turn more than the bound, the arc midpoints of both chords
+    become waypoints (halving the turn on an arc); repeated up to ``passes`` times.  A
+    vertex that itself turns more stays as it is (and is reported by the caller).
+    """
+    parc = _arc(poly)
+    for _ in range(passes):
+        if len(wps) < 3:
+            break
+        t = _turns(wps)
+        bad = np.flatnonzero(t > max_turn_deg + 1e-9) + 1  # waypoint indices
+        if not len(bad):
+            break
+        mids = np.concatenate([0.5 * (arc[bad - 1] + arc[bad]), 0.5 * (arc[bad] + arc[bad + 1])])
+        arc = np.union1d(arc, mids)
+        wps = np.column_stack([np.interp(arc, parc, poly[:, 0]), np.interp(arc, parc, poly[:, 1])])
+    return wps, arc
 
 
 def subsample(polyline: np.ndarray, delta: float, corner_deg: float = 30.0) -> tuple[np.ndarray, np.ndarray]:
@@ -528,6 +553,8 @@ class NetGeometry:
             poly, seg_lane, seg_on = round_corners(poly, seg_lane, seg_on, turn_max_deg)
             corner_deg = min(corner_deg, 0.5 * turn_max_deg)
         wps, arc = subsample(poly, delta, corner_deg)
+        if turn_max_deg is not None:
+            wps, arc = refine_turns(poly, wps, arc, turn_max_deg)
         parc = _arc(poly)
         seg = np.clip(np.searchsorted(parc, arc, side="right") - 1, 0, len(poly) - 2)
         d = np.diff(poly, axis=0)

@@ -196,3 +196,23 @@ def test_round_corners_bounds_every_turn(steps, max_turn):
     assert point_polyline_distance(q, p).max() <= CHAMFER_M + 1e-9
     assert len(lanes) == len(on) == len(q) - 1
     assert MIN_SEGMENT_M > 0
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.floats(1.5, 30.0), st.floats(30.0, 180.0), st.floats(1.0, 5.0))
+def test_refine_turns_on_tight_curves(radius, sweep_deg, delta):
+    """A smooth curve (vertices 2 deg apart, none sharp) of radius 1.5..30 m: chords delta apart
+    turn by ~delta / radius, more than 45 deg on tight ones; after refinement no waypoint turns
+    more than 45 deg, gaps stay <= delta and waypoints stay on the polyline (1e-9 m: round-off)."""
+    from bridge.waypoints import refine_turns
+
+    a = np.radians(np.arange(0.0, sweep_deg + 1e-9, 2.0))
+    p = np.column_stack([radius * np.sin(a), radius * (1 - np.cos(a))])
+    w, s = subsample(p, delta)
+    w2, s2 = refine_turns(p, w, s, 45.0)
+    assert len(w2) >= len(w)
+    if len(w2) > 2:
+        assert _turns(w2).max() <= 45.0 + 1e-9
+    assert np.hypot(*np.diff(w2, axis=0).T).max() <= delta + 1e-9
+    assert point_polyline_distance(w2, p).max() <= ON_POLYLINE_TOL
+    np.testing.assert_array_equal(w2[[0, -1]], p[[0, -1]])
