@@ -92,8 +92,9 @@ def _filtered(src: Path, dst: Path, drop: Iterable[str]) -> Path:
     tree = parse_xml(src)
     root = tree.getroot()
     drop = frozenset(drop)
-    for elem in [e for e in root if e.tag in drop]:
-        root.remove(elem)
+    for parent in list(root.iter()):  # at any depth (e.g. flows inside an <interval>)
+        for elem in [e for e in parent if e.tag in drop]:
+            parent.remove(elem)
     dst.parent.mkdir(parents=True, exist_ok=True)
     tree.write(dst, encoding="utf-8", xml_declaration=True)
     return dst

@@ -258,3 +258,25 @@ def test_trips_loaded_ahead_get_the_route_sumo_computes(tmp_path):
     d = SumoAdapter().expand_demand(c.path, inputs, begin_s=0.0, end_s=60.0, seed=1, step_length=0.5,
                                     work_dir=tmp_path / "in")
     assert [(v.id, v.depart_s, v.edges) for v in d.vehicles] == [("t", 40.0, ("ab", "bc", "cd"))]
+
+
+def test_prepared_inputs_drop_demand_and_outputs_keep_the_rest(tmp_path):
+    """The co-simulation's SUMO gets vTypes, routes, distributions, persons and signal programs,
+    not vehicles, trips or flows (at any depth) nor output elements; gzipped files are read."""
+    import xml.etree.ElementTree as ET
+
+    rou = tmp_path / "r.rou.xml.gz"
+    with gzip.open(rou, "wt") as fh:
+        fh.write('<routes><vType id="t"/><route id="r" edges="ab"/><vehicle id="v" depart="0" route="r"/>'
+                 '<interval begin="0" end="9"><flow id="f" begin="0" end="9" number="2" route="r"/></interval>'
+                 '<person id="p" depart="0"><walk edges="ab"/></person><trip id="x" depart="1" from="ab" to="ab"/>'
+                 '</routes>')
+    add = tmp_path / "a.add.xml"
+    add.write_text('<additional><edgeData id="d" file="o.xml"/><tlLogic id="j" type="static" programID="1" offset="0">'
+                   '<phase duration="30" state="G"/></tlLogic></additional>')
+    p = prepare_inputs([rou], [add], tmp_path / "w")
+    nd = ET.parse(p.no_demand_routes[0]).getroot()
+    assert {e.tag for e in nd.iter()} == {"routes", "vType", "route", "interval", "person", "walk"}
+    assert [e.tag for e in ET.parse(p.no_demand_additional[0]).getroot()] == ["tlLogic"]
+    assert [e.tag for e in ET.parse(p.expansion_additional[0]).getroot()] == ["tlLogic"]
+    assert p.expansion_routes == (rou,)  # SUMO reads the route files themselves
