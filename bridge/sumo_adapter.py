@@ -17,6 +17,12 @@ otherwise.  Waiting vehicles live only in muvsim
 a vehicle.  The delay itself is muvsim's to measure: SUMO's tripinfo counts
 ``depart`` from admission (``departDelay`` 0).
 
+For a user's ``.sumocfg`` the demand is SUMO's own: :meth:`SumoAdapter.expand_demand`
+runs the configuration once over the run's window with an always-empty network
+(each vehicle removed as SUMO inserts it) and records ids, vTypes, routes and
+requested departures; :meth:`SumoAdapter.start` then gets that demand and the
+configuration's demand-free inputs (:mod:`bridge.sumo_inputs`).
+
 SUMO options always set: ``--step-length`` (0.1 s), ``--collision.action
 warn --collision.check-junctions true --collision.mingap-factor 0`` (with the
 default action, teleport, moved vehicles report nothing), ``--no-step-log``,
