@@ -84,9 +84,11 @@ def test_too_few_vehicles(tmp_path, capsys, scenario, least):
 
 
 @pytest.mark.parametrize("vclass", ["bicycle", "pedestrian"])
-def test_sumocfg_vehicle_muvsim_cannot_drive_is_refused_by_name(grid_net, grid_routes, tmp_path, capsys, vclass):
-    """A .sumocfg vehicle whose vType has vClass bicycle/pedestrian is refused, naming the
-    vehicle, its vType and the valid vClasses -- never driven as a car."""
+def test_sumocfg_vehicle_of_another_vclass_is_driven_as_itself(grid_net, grid_routes, tmp_path, vclass):
+    """A .sumocfg vehicle whose vType has vClass bicycle/pedestrian is driven with a class made from
+    its own vType (its vClass, SUMO's length x width) -- never silently as a car."""
+    import pandas as pd
+
     text = grid_routes.read_text()
     text = text.replace('<vType id="car"', f'<vType id="slow" vClass="{vclass}" length="1.6" width="0.65"/>'
                                            '\n    <vType id="car"', 1)
@@ -95,13 +97,11 @@ def test_sumocfg_vehicle_muvsim_cannot_drive_is_refused_by_name(grid_net, grid_r
     rou.write_text(text)
     cfg = write_sumocfg(tmp_path / "mixed.sumocfg", grid_net, [rou])
     rc = main(["run", str(cfg), "--out", str(tmp_path / "out"), "--quiet", "--log", "none", "--duration", "5"])
-    assert rc == 1
-    lines = _err_lines(capsys)
-    msg = [ln for ln in lines if ln.startswith("muvsim run: ScenarioError:")]
-    assert len(msg) == 1, lines
-    assert f"vehicle '2': vType 'slow' has vClass '{vclass}'" in msg[0] and "passenger" in msg[0]
+    assert rc == 0
     s = json.loads((tmp_path / "out" / "summary.json").read_text())
-    assert s["complete"] is False and f"vClass '{vclass}'" in s["error"]
+    assert s["complete"] is True and s["collisions_sumo"] == 0
+    veh = pd.read_csv(tmp_path / "out" / "vehicles.csv", dtype={"id": str}).set_index("id")
+    assert veh.loc["2", "vclass"].startswith(f"{vclass}-1.6x0.65")  # the class name carries vClass and size
 
 
 def test_unexpected_error_is_one_line_and_debug_shows_the_traceback(tmp_path, monkeypatch, capsys):
