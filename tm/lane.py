@@ -27,6 +27,8 @@ from controllers.classes import VehicleClass
 from controllers.settings import ControllerSettings, SynthesisSettings
 from controllers.stmpc import STMPC
 from controllers.synthesis import synthesize
+from tm.settings import TMSettings
+from tm.manager import FleetState, TrafficManager
 from tm.reach import (ReachClaims, ReachModel, candidate_pairs, claims_conflict, pairwise_conflicts, reach_claims,
                       world_aabb)
 
@@ -49,18 +51,25 @@ class LaneSettings:
     seed : int
     v_entry : float
         Speed (m/s) of a vehicle entering at ``x = 0``.
+    policy : {"front", "greedy", "optimal"}
+        ``front``: requests granted front to back, each against every claim (this step's grants
+        included); ``greedy``, ``optimal``: the traffic manager's policies
+        (:meth:`tm.manager.TrafficManager.decide_reach`).
     """
 
     check: str = "timed"
     disturbance: str = "random"
     seed: int = 0
     v_entry: float = 13.89
+    policy: str = "front"
 
     def __post_init__(self) -> None:
         if self.check not in ("timed", "union"):
             raise ValueError(f"LaneSettings.check: must be 'timed' or 'union', got {self.check!r}")
         if self.disturbance not in POLICIES:
             raise ValueError(f"LaneSettings.disturbance: must be one of {POLICIES}, got {self.disturbance!r}")
+        if self.policy not in ("front", "greedy", "optimal"):
+            raise ValueError(f"LaneSettings.policy: must be 'front', 'greedy' or 'optimal', got {self.policy!r}")
         if not self.v_entry >= 0:
             raise ValueError(f"LaneSettings.v_entry: must be >= 0 m/s, got {self.v_entry}")
 
@@ -107,6 +116,7 @@ class Lane:
         self.t = 0
         self.stop_k: int | None = None  # red light: no waypoint beyond this index
         self.next_id = 0
+        self._tm = None
         self.deny_all = False  # the TM that grants nothing (its claims must stay disjoint)
         self.invariant_violations = 0
         self.footprint_overlaps = 0
@@ -256,6 +266,9 @@ class Lane:
         req = np.nonzero(want)[0]
         self.requests += len(req)
         cur = ReachClaims.concat(*[v.claim for v in self.vehicles])
+        if self.settings.policy != "front":
+            self._decide_tm(want, lp, cur)
+            return
         lo, hi = cur.lo.copy(), cur.hi.copy()
         if len(req):
             k_new = [v.k + 1 for v in self.vehicles]
@@ -284,6 +297,38 @@ class Lane:
                 self.grants += 1
             cur = ReachClaims(centre, heading, lo, hi)
         ci, _ = pairwise_conflicts(cur, self.settings.check)
+        self.claim_overlaps += len(ci)
+
+    def _tm_for(self) -> TrafficManager:
+        """The traffic manager, (re)built when a class joins (waiting counts carried over)."""
+        have = {v.cls.vclass.name: v.cls for v in self.vehicles}
+        if self._tm is None or not set(have) <= set(self._tm.table.keys):
+            fams = {name: lc.ctl.family.position_sets for name, lc in have.items()}
+            tm = TrafficManager(TMSettings(check=self.settings.check, policy=self.settings.policy,
+                                           seed=self.settings.seed), fams, rotating=set(fams))
+            if self._tm is not None:
+                tm._waited = dict(self._tm._waited)
+            self._tm = tm
+        return self._tm
+
+    def _decide_tm(self, want: np.ndarray, lp: np.ndarray, cur: ReachClaims) -> None:
+        n = len(self.vehicles)
+        req = np.nonzero(want)[0]
+        k_new = np.array([v.k + 1 for v in self.vehicles])
+        new = self._batch_claims(k_new, np.where(want, lp, 0)).take(req)
+        state = FleetState(ids=[str(v.vid) for v in self.vehicles], family=[v.cls.vclass.name for v in self.vehicles],
+                           centre=cur.centre, index=[v.l for v in self.vehicles], heading=np.zeros(n),
+                           length=[v.cls.vclass.length for v in self.vehicles],
+                           width=[v.cls.vclass.width for v in self.vehicles], requesting=want,
+                           req_centre=self._c(k_new), req_index=lp, req_heading=np.zeros(n))
+        dec = self._tm_for().decide_reach(state, cur, new)
+        for r, i in enumerate(req):
+            if dec.go[i]:
+                v = self.vehicles[i]
+                v.k, v.l = v.k + 1, int(lp[i])
+                v.claim = new.take([r])
+                self.grants += 1
+        ci, _ = pairwise_conflicts(dec.claims, self.settings.check)
         self.claim_overlaps += len(ci)
 
     def _disturbance(self, m, x, U, c, rank, n) -> np.ndarray:

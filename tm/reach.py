@@ -39,7 +39,7 @@ from controllers.synthesis import SetFamily, along_factor, rotate_pairs
 from controllers.tolerances import GEOMETRY_TOL
 
 __all__ = ["ReachModel", "ReachClaims", "reach_claims", "claims_conflict", "pairwise_conflicts", "world_aabb",
-           "candidate_pairs"]
+           "candidate_pairs", "pad_slots"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -207,6 +207,17 @@ def reach_claims(rm: ReachModel, X: np.ndarray, centre: np.ndarray, heading: np.
     hi[..., 1] += fy[:, None]
     lo[empty], hi[empty] = np.inf, -np.inf  # keep empty boxes empty after the footprint
     return ReachClaims(centre, heading, lo, hi)
+
+
+def pad_slots(c: ReachClaims, K: int) -> ReachClaims:
+    """``c`` with ``K`` slots: a shorter horizon is padded with its last slot (every later step)."""
+    k = c.lo.shape[1]
+    if k == K:
+        return c
+    if k > K:
+        raise ValueError(f"pad_slots: claims have {k} slots, more than {K}")
+    rep = lambda a: np.concatenate([a, np.repeat(a[:, -1:], K - k, axis=1)], axis=1)  # noqa: E731
+    return ReachClaims(c.centre, c.heading, rep(c.lo), rep(c.hi))
 
 
 def _obb(ci, hi_, c, s, lo, hi):

@@ -14,6 +14,8 @@ from controllers.settings import SynthesisSettings
 from controllers.synthesis import rotate_pairs
 from controllers.tolerances import GEOMETRY_TOL
 from tm.lane import Lane, LaneSettings, lane_class
+from tm.manager import FleetState, TrafficManager
+from tm.settings import TMSettings
 from tm.reach import ReachModel, claims_conflict, pairwise_conflicts, reach_claims
 
 URBAN = ("car", "bus", "truck")
@@ -98,12 +100,13 @@ def test_timed_is_less_conservative_than_union_and_both_see_overlap(lcs):
 @given(classes=st.lists(st.sampled_from(URBAN), min_size=2, max_size=5), gaps=st.lists(st.integers(4, 12), min_size=5,
        max_size=5), check=st.sampled_from(["timed", "union"]),
        policy=st.sampled_from(["random", "adversarial", "squeeze"]), seed=st.integers(0, 1000),
-       red=st.integers(0, 80), deny=st.booleans())
-def test_random_fleets_on_a_lane_never_touch(lcs, classes, gaps, check, policy, seed, red, deny):
+       red=st.integers(0, 80), deny=st.booleans(), tm=st.sampled_from(["front", "greedy", "optimal"]))
+def test_random_fleets_on_a_lane_never_touch(lcs, classes, gaps, check, policy, seed, red, deny, tm):
     """Random mixed fleets placed at rest on one lane, entries at the lane start, a red light
-    for ``red`` steps (or a TM that grants nothing): after every decision and every step the
-    claims are pairwise disjoint, no two footprints overlap, the index invariant holds."""
-    lane = Lane(LaneSettings(check=check, disturbance=policy, seed=seed))
+    for ``red`` steps (or a TM that grants nothing), decisions front to back or by the traffic
+    manager's policies (decide_reach): after every decision and every step the claims are
+    pairwise disjoint, no two footprints overlap, the index invariant holds."""
+    lane = Lane(LaneSettings(check=check, disturbance=policy, seed=seed, policy=tm))
     k = 40
     for c, g in zip(classes, gaps):
         lane.place(lcs[c], k)
@@ -159,3 +162,45 @@ def test_bad_lane_settings_are_named():
         LaneSettings(disturbance="gusty")
     with pytest.raises(ValueError, match="comfort_decel"):
         lane_class(get_class("paper-a"))
+
+
+def _state(n, requesting):
+    return FleetState(ids=[f"v{i}" for i in range(n)], family=["car"] * n, centre=np.zeros((n, 2)),
+                      index=np.zeros(n, dtype=int), heading=np.zeros(n), length=np.full(n, 5.0),
+                      width=np.full(n, 1.8), requesting=requesting, req_centre=np.zeros((n, 2)),
+                      req_index=np.zeros(n, dtype=int), req_heading=np.zeros(n))
+
+
+@pytest.mark.parametrize("policy", ["greedy", "optimal"])
+def test_decide_reach_kinds_of_conflict(lcs, policy):
+    """decide_reach on hand-made claims: a new claim that meets a non-requester's claim is denied
+    (forced); two requesters whose new claims meet cannot both go, and one whose new claim meets
+    the other's current claim needs it granted (optimal: the largest feasible set); claims after
+    the decision are disjoint (verify on)."""
+    lc = lcs["car"]
+    ctl = lc.ctl
+    tmgr = TrafficManager(TMSettings(check="timed", policy=policy, verify=True),
+                          {"car": ctl.family.position_sets}, rotating={"car"})
+    # v0 at rest on waypoint 30 (fixed, not requesting); v1 at rest 4 waypoints behind asks for 1 more
+    # -> its new claim reaches v0's; v2, v3 at rest far ahead, 3 waypoints apart, both ask for 1 more
+    X = np.array([[90.0, 0, 0, 0], [78.0, 0, 0, 0], [300.0, 0, 0, 0], [309.0, 0, 0, 0]])
+    k = np.array([30, 26, 100, 103])
+    C = np.column_stack([k * 3.0, np.zeros(4)])
+    l = ctl.index(X, C, np.zeros(4))
+    cur = reach_claims(lc.reach, X, C, np.zeros(4), l)
+    assert len(pairwise_conflicts(cur)[0]) == 0
+    req = np.array([False, True, True, True])
+    Cn = np.column_stack([(k + 1) * 3.0, np.zeros(4)])
+    Cn[1, 0] = 87.0   # v1 asks for the waypoint right behind v0: its claim reaches v0's body
+    Cn[2, 0] = 306.0  # v2 asks for v3's waypoint, v3 for one beyond: new claims meet only each other
+    ln = ctl.index(X, Cn, np.zeros(4))
+    assert np.all(ln <= ctl.N)
+    new = reach_claims(lc.reach, X[req], Cn[req], np.zeros(3), ln[req])
+    dec = tmgr.decide_reach(_state(4, req), cur, new)
+    assert not dec.go[1] and dec.forced[1]
+    assert not (dec.go[2] and dec.go[3])
+    if policy == "optimal":  # the only largest feasible set: v3 goes (v2 would need v3's old claim gone)
+        assert dec.go[3] and not dec.go[2]
+    assert len(pairwise_conflicts(dec.claims)[0]) == 0
+    kinds = set(dec.edge_kinds.tolist())
+    assert "new-fixed" in kinds
