@@ -61,6 +61,46 @@ def h_exact(V: np.ndarray, w: np.ndarray) -> np.ndarray:
     return np.minimum(cand.min(axis=1), np.nanmin(np.where(np.isnan(cr), np.inf, cr), axis=1))
 
 
+def _ccw(V: np.ndarray) -> np.ndarray:
+    """Vertices of a convex polygon in counter-clockwise order (sorted by angle about the centroid)."""
+    c = V.mean(axis=0)
+    return V[np.argsort(np.arctan2(V[:, 1] - c[1], V[:, 0] - c[0]))]
+
+
+def _chain(V: np.ndarray, right: bool) -> tuple[np.ndarray, np.ndarray]:
+    """The right (``p`` largest) or left boundary of a CCW convex polygon as ``(v, p)`` with ``v``
+    increasing: CCW from the bottom runs up the right side, clockwise up the left side."""
+    k = len(V)
+    v = V[:, 1]
+    lo_i = np.flatnonzero(v == v.min())
+    hi_i = np.flatnonzero(v == v.max())
+    order = np.arange(k) if right else np.arange(k)[::-1]  # CCW, or clockwise
+    pos = np.empty(k, dtype=np.intp)
+    pos[order] = np.arange(k)
+    # start: the bottom vertex furthest along the walk's bottom edge (rightmost / leftmost)
+    start = max(lo_i, key=lambda i: (V[i, 0] if right else -V[i, 0]))
+    seq = np.roll(order, -int(pos[start]))
+    stop = int(np.flatnonzero(np.isin(seq, hi_i))[0])
+    idx = seq[:stop + 1]
+    return V[idx, 1], V[idx, 0]
+
+
+def _g_fast(V: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """:func:`g_exact` on a grid via the right boundary (concave): ``p_right(max(w, v*))``."""
+    vc, pc = _chain(V, right=True)
+    vstar = vc[int(np.argmax(pc))]
+    out = np.interp(np.maximum(w, vstar), vc, pc)
+    return np.where(w > vc[-1], -np.inf, out)
+
+
+def _h_fast(V: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """:func:`h_exact` on a grid via the left boundary (convex): ``p_left(min(w, v_*))``."""
+    vc, pc = _chain(V, right=False)
+    vstar = vc[int(np.argmin(pc))]
+    out = np.interp(np.minimum(w, vstar), vc, pc)
+    return np.where(w < vc[0], np.inf, out)
+
+
 @dataclass(frozen=True, eq=False)
 class AuthorityTables:
     """Safe-side tables of one family's levels ``0 .. N`` (read-only arrays).
@@ -121,14 +161,14 @@ def build_tables(family: SetFamily, dw: float = DEFAULT_DV) -> AuthorityTables:
         raise SynthesisError(f"{family.model.name}: authority tables need a 2-D along factor (p_x, v_x), "
                              f"this one has states {f.states.tolist()}")
     ip, iv = list(f.states).index(0), list(f.states).index(2)
-    polys = [lev.vertices[:, [ip, iv]] for lev in f.levels]
+    polys = [_ccw(lev.vertices[:, [ip, iv]]) for lev in f.levels]
     v_lo = np.array([P[:, 1].min() for P in polys])
     v_hi = np.array([P[:, 1].max() for P in polys])
     w0 = float(np.floor(v_lo.min() / dw) * dw)
     W = int(np.ceil((v_hi.max() - w0) / dw)) + 1
     w = w0 + dw * np.arange(W)
-    G = np.vstack([g_exact(P, w) for P in polys]) + tol.AUTHORITY_TABLE_TOL
-    H = np.vstack([h_exact(P, w) for P in polys]) - tol.AUTHORITY_TABLE_TOL
+    G = np.vstack([_g_fast(P, w) for P in polys]) + tol.AUTHORITY_TABLE_TOL
+    H = np.vstack([_h_fast(P, w) for P in polys]) - tol.AUTHORITY_TABLE_TOL
     ylo, yhi = [], []
     k_y = next(k for k, fa in enumerate(family.factors) if 1 in fa.states)
     fy = family.factors[k_y]
