@@ -24,6 +24,14 @@ CITY_V_MAX = 13.89
 #: Largest acceleration bound along the road of a class built from a vType (m/s^2).
 CITY_U_MAX = 3.0
 
+#: Movement-authority deceleration ``a_c`` of the car (m/s^2): 5/6 of its 3 m/s^2 input bound,
+#: the figure design.md §7 was prototyped with (s_MA = 44.6 m at 13.89 m/s).
+CAR_COMFORT_DECEL = 2.5
+#: ``a_c`` of bus and truck (m/s^2): 0.8 of their 1.5 m/s^2 bound, within the 1-1.5 m/s^2
+#: usually taken as comfortable service braking with standing passengers / loose cargo; the
+#: rest (0.3 m/s^2) is the margin the tube needs against the disturbance.
+HEAVY_COMFORT_DECEL = 1.2
+
 
 class ClassError(KeyError):
     """Unknown vehicle class."""
@@ -44,6 +52,9 @@ class VehicleClass:
         Footprint (m), centred on the state's position.
     vclass : str
         SUMO vClass this class stands for.
+    comfort_decel : float or None
+        ``a_c`` (m/s^2) of the movement-authority mode (design.md §7), below the
+        along-road input bound; None for classes that only run the paper's mode.
     """
 
     name: str
@@ -51,11 +62,15 @@ class VehicleClass:
     length: float
     width: float
     vclass: str
+    comfort_decel: float | None = None
 
     def __post_init__(self) -> None:
         if not (self.length > 0 and self.width > 0):
             raise ValueError(f"class {self.name!r}: length and width must be > 0 m, "
                              f"got {self.length} x {self.width}")
+        if self.comfort_decel is not None and not 0 < self.comfort_decel < float(self.model.u_bounds[1][0]):
+            raise ValueError(f"class {self.name!r}: comfort_decel must lie in (0, {self.model.u_bounds[1][0]:g}) "
+                             f"m/s^2 (the along-road input bound), got {self.comfort_decel}")
 
     @property
     def v_max(self) -> float:
@@ -135,15 +150,15 @@ def builtin_classes() -> dict[str, VehicleClass]:
     road = dict(frame="road", turn_max_deg=CITY_TURN_MAX_DEG, delta=3.0)
     out["car"] = VehicleClass(
         "car", double_integrator(v_max=(13.89, 0.2), u_max=(3.0, 0.5), d_max=0.005, name="car", **road),
-        length=5.0, width=1.8, vclass="passenger")
+        length=5.0, width=1.8, vclass="passenger", comfort_decel=CAR_COMFORT_DECEL)
     out["bus"] = VehicleClass(
         "bus", drag_integrator(v_max=(13.89, 0.2), u_max=(1.5, 0.5), d_max=0.005, tau=10.0, name="bus",
                                **road),
-        length=12.0, width=2.5, vclass="bus")
+        length=12.0, width=2.5, vclass="bus", comfort_decel=HEAVY_COMFORT_DECEL)
     out["truck"] = VehicleClass(
         "truck", double_integrator(v_max=(13.89, 0.2), u_max=(1.5, 0.5), d_max=0.005, name="truck",
                                    **road),
-        length=7.1, width=2.4, vclass="truck")
+        length=7.1, width=2.4, vclass="truck", comfort_decel=HEAVY_COMFORT_DECEL)
     return out
 
 

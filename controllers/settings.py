@@ -11,6 +11,7 @@ __all__ = ["SynthesisSettings", "ControllerSettings", "SettingsError", "default_
 
 SOLVERS = ("exact", "daqp", "proxsuite")
 STRUCTURES = ("auto", "full")
+MODES = ("paper", "authority")
 
 
 class SettingsError(ValueError):
@@ -51,6 +52,13 @@ class SynthesisSettings:
     structure : {"auto", "full"}
         ``auto`` works on decoupled factors (products of low-dimensional sets);
         ``full`` uses the general n-D path on the whole state.
+    authority_decel : float or None
+        Movement-authority mode (design.md §7) when set: a comfortable deceleration
+        ``a_c`` (m/s^2, ``0 < a_c <`` the along-road input bound).  The family then
+        continues past the first level meeting condition (8) up to ``N_L``, the first
+        level whose along-road factor contains the state ``(-s_MA, v̄)`` with
+        ``s_MA = v̄^2 / (2 a_c) + 2 delta``; every factor gets the same ``N_L`` levels.
+        ``None`` (default): the paper's family, unchanged (and its cache key).
     cache : bool
         Read and write the on-disk cache.
     cache_dir : Path or None
@@ -64,6 +72,7 @@ class SynthesisSettings:
     terminal_method: Literal["auto", "zonotope", "maximal"] = "auto"
     extra_levels: int = 0
     structure: Literal["auto", "full"] = "auto"
+    authority_decel: float | None = None
     cache: bool = True
     cache_dir: Path | None = None
 
@@ -81,11 +90,16 @@ class SynthesisSettings:
             raise SettingsError(f"SynthesisSettings.extra_levels: must be an integer >= 0, got {self.extra_levels!r}")
         if self.structure not in STRUCTURES:
             raise SettingsError(f"SynthesisSettings.structure: must be one of {STRUCTURES}, got {self.structure!r}")
+        a = self.authority_decel
+        if a is not None and (isinstance(a, bool) or not isinstance(a, (int, float)) or not a > 0):
+            raise SettingsError("SynthesisSettings.authority_decel: must be None (paper family) or a "
+                                f"deceleration > 0 m/s^2, got {a!r}")
 
     def key(self) -> str:
         """The part of the cache key that depends on the settings."""
         return f"q{self.q_weight:g}-r{self.r_weight:g}-e{self.epsilon:g}-L{self.max_levels}-" \
-               f"T{self.terminal_method}-{self.structure}-x{self.extra_levels}"
+               f"T{self.terminal_method}-{self.structure}-x{self.extra_levels}" + \
+            ("" if self.authority_decel is None else f"-MA{self.authority_decel:g}")
 
 
 @dataclass(frozen=True)
@@ -101,10 +115,20 @@ class ControllerSettings:
     switching : {"terminal", "early"}
         ``terminal`` asks to switch waypoint only from ``T^0`` (the paper);
         ``early`` asks whenever the state lies in the next waypoint's domain.
+    mode : {"paper", "authority"}
+        ``paper``: the cost of eq. (6) (pull to the waypoint's equilibrium).
+        ``authority`` (needs a movement-authority family, see
+        :class:`SynthesisSettings`): the along-road cost tracks
+        ``v_des = min(v̄, cap, sqrt(2 a_c (s(c) - s(x) - s0)))`` instead; the tube
+        constraint of eq. (6) is unchanged, so is every guarantee.
+    standoff : float
+        ``s0`` (m, >= 0) of ``v_des``: how far short of its waypoint the cost aims to stop.
     """
 
     solver: Literal["exact", "daqp", "proxsuite"] = "exact"
     switching: Literal["terminal", "early"] = "early"
+    mode: Literal["paper", "authority"] = "paper"
+    standoff: float = 0.0
 
     def __post_init__(self) -> None:
         if self.solver not in SOLVERS:
@@ -112,3 +136,7 @@ class ControllerSettings:
         if self.switching not in ("terminal", "early"):
             raise SettingsError(
                 f"ControllerSettings.switching: must be 'terminal' or 'early', got {self.switching!r}")
+        if self.mode not in MODES:
+            raise SettingsError(f"ControllerSettings.mode: must be one of {MODES}, got {self.mode!r}")
+        if not isinstance(self.standoff, (int, float)) or not self.standoff >= 0:
+            raise SettingsError(f"ControllerSettings.standoff: must be a distance >= 0 m, got {self.standoff!r}")

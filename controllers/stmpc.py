@@ -177,6 +177,14 @@ class STMPC:
                 Hp=Hp, hp=hp, gp=gp, HtAp=HtAp, htp=htp, polar=_Polar.build(f.levels)))
         self._steps = max(1, int(np.ceil(np.log2(self.N + 2))))
         self._daqp = None
+        self.authority = family.authority
+        if self.settings.mode == "authority" and self.authority is None:
+            raise ValueError(f"{self.model.name}: ControllerSettings.mode='authority' needs a family synthesised "
+                             "with SynthesisSettings.authority_decel set (this one is the paper's family)")
+        # along factor: the table of state 0, and the factor-local column of the velocity (state 2)
+        self._along = next(k for k, t in enumerate(self._tables) if 0 in t.states)
+        st = list(self._tables[self._along].states)
+        self._along_v = st.index(2) if 2 in st else None
 
     # ------------------------------------------------------------------ On-1
     def error(self, X: np.ndarray, centres: np.ndarray, heading=None) -> np.ndarray:
@@ -253,10 +261,51 @@ class STMPC:
             return rotate_pairs(U, np.asarray(heading, dtype=float))
         return U
 
+    # ------------------------------------------------------------------ movement authority
+    def lead(self, X: np.ndarray, centres: np.ndarray, heading=None) -> np.ndarray:
+        """``s(c) - s(x)``: how far each waypoint ``c`` lies ahead along its segment (m)."""
+        return -self.error(X, centres, heading)[:, 0]
+
+    def authority_lead(self, v_cap=None) -> np.ndarray | float:
+        """The lead a vehicle asks for: ``s_MA``, or ``v_cap^2 / (2 a_c) + 2 delta`` when a lower
+        speed limit applies (a longer authority would make the tube, which must shrink by one
+        level a step, push the vehicle above the limit)."""
+        a = self.authority
+        if v_cap is None:
+            return a.s_ma
+        v = np.clip(np.asarray(v_cap, dtype=float), 0.0, a.v_bar)
+        return v ** 2 / (2.0 * a.decel) + 2.0 * self.model.delta
+
+    def may_request(self, X: np.ndarray, centres: np.ndarray, heading, l_next: np.ndarray,
+                    v_cap=None) -> np.ndarray:
+        """Movement-authority request rule (design.md §7): ask ``c -> c + delta`` iff the state
+        lies in ``T^{N_L}(c + delta)`` (``l_next <= N``, the index w.r.t. the next waypoint) and
+        the lead to the current waypoint is below :meth:`authority_lead`.  Paper mode:
+        ``l_next <= N`` only."""
+        ok = np.asarray(l_next) <= self.N
+        if self.settings.mode == "authority":
+            ok &= self.lead(X, centres, heading) < self.authority_lead(v_cap)
+        return ok
+
+    def desired_speed(self, E: np.ndarray, v_cap=None) -> np.ndarray:
+        """``v_des = min(v̄, cap, sqrt(2 a_c max(lead - s0, 0)))`` for error rows ``E`` (road frame).
+
+        ``v_cap``: per-row further speed limits (lane limit, curve speed; m/s), or None."""
+        a = self.authority
+        lead = -E[:, 0] - self.settings.standoff
+        v = np.minimum(a.v_bar, np.sqrt(2.0 * a.decel * np.maximum(lead, 0.0)))
+        if v_cap is not None:
+            v = np.minimum(v, np.maximum(np.asarray(v_cap, dtype=float), 0.0))
+        return v
+
     # ------------------------------------------------------------------ On-2
     def control(self, X: np.ndarray, centres: np.ndarray, l: np.ndarray,
-                ids: list | None = None, heading=None) -> np.ndarray:
+                ids: list | None = None, heading=None, v_cap=None) -> np.ndarray:
         """Inputs (world frame) for states ``X`` at indices ``l`` w.r.t. waypoints ``centres``.
+
+        In ``authority`` mode the along-road factor's cost is ``(v+ - v_des)^2`` (see
+        :meth:`desired_speed`; ``v_cap`` per-row extra speed limits); every other factor, and
+        every constraint, is that of eq. (6).
 
         Raises
         ------
@@ -276,22 +325,30 @@ class STMPC:
         qp = np.nonzero(l > 0)[0]
         if qp.size:
             solver = self.settings.solver
+            vdes = None
+            if self.settings.mode == "authority":
+                vdes = self.desired_speed(E[qp], None if v_cap is None else np.asarray(v_cap, dtype=float)[qp])
             if solver == "exact" and all(len(t.inputs) == 1 for t in self._tables):
-                U[qp] = self._solve_exact(E[qp], l[qp], qp, ids)
+                U[qp] = self._solve_exact(E[qp], l[qp], qp, ids, vdes)
             else:
-                U[qp] = self._solve_generic(E[qp], l[qp], qp, ids, "daqp" if solver == "exact" else solver)
+                U[qp] = self._solve_generic(E[qp], l[qp], qp, ids, "daqp" if solver == "exact" else solver,
+                                            vdes)
         return self._to_world(U, heading)
 
-    def _solve_exact(self, E, l, rows, ids):
+    def _solve_exact(self, E, l, rows, ids, vdes=None):
         """Closed form per single-input factor, every vehicle at once (levels gathered)."""
         U = np.empty((E.shape[0], self.model.m))
         ulo, uhi = self.model.u_bounds
         lev = l - 1
-        for t in self._tables:
+        for ti, t in enumerate(self._tables):
             k = int(t.inputs[0])
             Ef = E[:, t.states]
             b = t.B[:, 0]
-            u_free = -((Ef @ t.A.T) @ b) / (b @ b)
+            if vdes is not None and ti == self._along:
+                j = self._along_v  # min (A e + b u)_v - v_des)^2: a 1-D least squares
+                u_free = (vdes - Ef @ t.A[j]) / b[j]
+            else:
+                u_free = -((Ef @ t.A.T) @ b) / (b @ b)
             g = t.gp[lev]                                   # (V, Ft)
             beta = t.htp[lev].copy()                        # h~ - H~ A e
             for j in range(len(t.states)):
@@ -312,16 +369,20 @@ class STMPC:
             U[:, k] = np.clip(mid, np.minimum(lo, hi), np.maximum(lo, hi))
         return U
 
-    def _qp_data(self, e, lev):
-        """Dense QP data of eq. (6) on all inputs: 0.5 u'Hu + f'u, G u <= g."""
+    def _qp_data(self, e, lev, vdes=None):
+        """Dense QP data of eq. (6) on all inputs: 0.5 u'Hu + f'u, G u <= g (``vdes``: the
+        movement-authority cost on the along factor instead)."""
         m = self.model.m
         Hq = np.zeros((m, m))
         f = np.zeros(m)
         G_rows, g_rows = [], []
-        for t in self._tables:
+        for ti, t in enumerate(self._tables):
             ef = e[t.states]
             Ae = t.A @ ef
             Bf = t.B
+            if vdes is not None and ti == self._along:
+                j = self._along_v
+                Ae, Bf = np.array([Ae[j] - vdes]), Bf[j:j + 1]
             Hq[np.ix_(t.inputs, t.inputs)] += Bf.T @ Bf
             f[t.inputs] += Bf.T @ Ae
             G = np.zeros((t.Ht[lev - 1].shape[0], m))
@@ -330,11 +391,11 @@ class STMPC:
             g_rows.append(t.ht[lev - 1] - t.HtA[lev - 1] @ ef)
         return Hq, f, np.vstack(G_rows), np.concatenate(g_rows)
 
-    def _solve_generic(self, E, l, rows, ids, solver):
+    def _solve_generic(self, E, l, rows, ids, solver, vdes=None):
         U = np.empty((E.shape[0], self.model.m))
         ulo, uhi = self.model.u_bounds
         for i in range(E.shape[0]):
-            Hq, f, G, g = self._qp_data(E[i], int(l[i]))
+            Hq, f, G, g = self._qp_data(E[i], int(l[i]), None if vdes is None else float(vdes[i]))
             if solver == "daqp":
                 u, ok = _solve_daqp(Hq, f, G, g, ulo, uhi)
             else:

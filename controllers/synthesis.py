@@ -36,7 +36,7 @@ from controllers.models import VehicleModel, decoupled_blocks
 from controllers.polytope import Polytope
 from controllers.settings import SynthesisSettings, default_cache_dir
 
-__all__ = ["SynthesisError", "FactorSets", "SetFamily", "synthesize", "lqr_gain", "rotate_pairs",
+__all__ = ["SynthesisError", "FactorSets", "SetFamily", "Authority", "synthesize", "along_factor", "lqr_gain", "rotate_pairs",
            "terminal_set", "one_step_set"]
 
 CACHE_VERSION = "1"
@@ -73,6 +73,45 @@ class FactorSets:
     U: Polytope
 
 
+@dataclass(frozen=True)
+class Authority:
+    """Movement-authority data of a family (design.md §7).
+
+    Attributes
+    ----------
+    decel : float
+        ``a_c``, the comfortable deceleration (m/s^2) the family was built for.
+    v_bar : float
+        Along-road speed bound ``v̄`` (m/s).
+    s_ma : float
+        ``s_MA = v̄^2 / (2 a_c) + 2 delta`` (m): the lead a cruising vehicle keeps.
+    n_min : int
+        First level meeting condition (8) (the paper's N); the family has
+        ``N = N_L >= n_min`` levels.
+    """
+
+    decel: float
+    v_bar: float
+    s_ma: float
+    n_min: int
+
+
+def along_factor(family: "SetFamily") -> int:
+    """Index of the factor holding state 0 (the along-road / x position)."""
+    for k, f in enumerate(family.factors):
+        if 0 in f.states:
+            return k
+    raise SynthesisError("no factor holds state 0")
+
+
+def _ma_point(model: VehicleModel, states: np.ndarray, s_ma: float) -> np.ndarray:
+    """``(-s_MA, v̄)`` in the along factor's coordinates (other states 0)."""
+    e = np.zeros(len(states))
+    e[list(states).index(0)] = -s_ma
+    e[list(states).index(2)] = float(model.z_bounds[1][0])
+    return e
+
+
 @dataclass(frozen=True, eq=False)
 class SetFamily:
     """Everything the online controller and the traffic manager need for a class.
@@ -102,6 +141,7 @@ class SetFamily:
     position_sets: list
     seconds: float
     from_cache: bool = False
+    authority: Authority | None = None
     _full: dict = field(default_factory=dict, repr=False)
 
     def level(self, l: int) -> Polytope:
@@ -148,6 +188,9 @@ class SetFamily:
             "factors": [len(f.states) for f in self.factors],
             "synthesis_s": round(self.seconds, 4),
             "from_cache": self.from_cache,
+            **({} if self.authority is None else
+               {"authority_decel": self.authority.decel, "s_ma": round(self.authority.s_ma, 3),
+                "N_min": self.authority.n_min}),
         }
 
 
@@ -427,6 +470,10 @@ def synthesize(model: VehicleModel, settings: SynthesisSettings | None = None) -
         if ok:
             N = l
             break
+    authority = None
+    if N is not None and settings.authority_decel is not None:
+        authority = _extend_to_authority(model, settings, prepared, levels, tildes, N)
+        N = len(levels[0]) - 1
     if N is not None:
         for _ in range(settings.extra_levels):
             for k, (states, inputs, A, B, K, X, U, D, T0, info) in enumerate(prepared):
@@ -449,10 +496,39 @@ def synthesize(model: VehicleModel, settings: SynthesisSettings | None = None) -
         Kfull[np.ix_(inputs, states)] = K
     seconds = time.perf_counter() - t0
     fam = SetFamily(model=model, factors=factors, K=Kfull, N=N, condition8=True,
-                    position_sets=_position_sets(factors, N), seconds=seconds)
+                    position_sets=_position_sets(factors, N), seconds=seconds, authority=authority)
     if settings.cache:
         _save(fam, path)
     return fam
+
+
+def _extend_to_authority(model: VehicleModel, settings: SynthesisSettings, prepared: list,
+                         levels: list, tildes: list, n_min: int) -> Authority:
+    """Add one-step sets to every factor until the along factor contains ``(-s_MA, v̄)``."""
+    a_c = float(settings.authority_decel)
+    states0 = [p[0] for p in prepared]
+    k_al = next((k for k, st in enumerate(states0) if 0 in st), None)
+    if k_al is None or 2 not in states0[k_al]:
+        raise SynthesisError(f"{model.name}: movement authority needs the along-road velocity (state 2) "
+                             "in the factor of the along-road position (state 0)")
+    u_al = float(model.u_bounds[1][prepared[k_al][1][0]])
+    if not a_c < u_al:
+        raise SynthesisError(f"{model.name}: SynthesisSettings.authority_decel = {a_c:g} m/s^2 must be below "
+                             f"the along-road input bound {u_al:g} m/s^2")
+    v_bar = float(model.z_bounds[1][0])
+    s_ma = v_bar ** 2 / (2.0 * a_c) + 2.0 * model.delta
+    point = _ma_point(model, states0[k_al], s_ma)[None, :]
+    while not levels[k_al][-1].contains(point, tol.MEMBERSHIP_TOL)[0]:
+        if len(levels[k_al]) - 1 >= settings.max_levels:
+            raise SynthesisError(
+                f"{model.name}: no level up to max_levels={settings.max_levels} contains the movement-"
+                f"authority state (-s_MA, v̄) = ({-s_ma:.4g} m, {v_bar:g} m/s) for authority_decel={a_c:g}: "
+                "raise max_levels or authority_decel")
+        for k, (states, inputs, A, B, K, X, U, D, T0, info) in enumerate(prepared):
+            T = one_step_set(tildes[k][-1], A, B, U, X)
+            levels[k].append(T)
+            tildes[k].append(T - D)
+    return Authority(decel=a_c, v_bar=v_bar, s_ma=s_ma, n_min=n_min)
 
 
 def _position_sets(factors: list[FactorSets], N: int) -> list[np.ndarray]:
@@ -482,6 +558,9 @@ def _cache_path(model: VehicleModel, settings: SynthesisSettings) -> Path:
 
 def _save(fam: SetFamily, path: Path) -> None:
     data = {"N": np.array(fam.N), "seconds": np.array(fam.seconds), "nf": np.array(len(fam.factors))}
+    if fam.authority is not None:
+        a = fam.authority
+        data["authority"] = np.array([a.decel, a.v_bar, a.s_ma, a.n_min], dtype=float)
     for k, f in enumerate(fam.factors):
         data[f"f{k}_states"] = f.states
         data[f"f{k}_inputs"] = f.inputs
@@ -520,5 +599,10 @@ def _load(model: VehicleModel, path: Path) -> SetFamily:
                                       levels=levels, tilde=tildes, D=D, U=U))
             Kfull[np.ix_(inputs, states)] = K
         seconds = float(z["seconds"])
+        authority = None
+        if "authority" in z.files:
+            a = z["authority"]
+            authority = Authority(decel=float(a[0]), v_bar=float(a[1]), s_ma=float(a[2]), n_min=int(a[3]))
     return SetFamily(model=model, factors=factors, K=Kfull, N=N, condition8=True,
-                     position_sets=_position_sets(factors, N), seconds=seconds, from_cache=True)
+                     position_sets=_position_sets(factors, N), seconds=seconds, from_cache=True,
+                     authority=authority)

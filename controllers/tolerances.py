@@ -65,3 +65,8 @@ HOLD_TOL_RAD = 0.005
 
 #: Slack used when verifying invariance / one-step properties by LP.
 VERIFY_TOL = 1e-7
+
+#: Outward rounding of the movement-authority tables g_m(w), h_m(w) (m): g is raised and h
+#: lowered by this after computing them from the polygon's vertices (the edge interpolation
+#: at v = w rounds at ~1e-14 relative on values <= ~200 m).
+AUTHORITY_TABLE_TOL = 1e-6

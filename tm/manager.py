@@ -38,6 +38,7 @@ from controllers.tolerances import GEOMETRY_TOL
 from tm.claims import Claims, claim_conflicts, conflicting_pairs
 from tm.families import FamilyTable, build_family_table
 from tm.geometry import broad_phase
+from tm.reach import ReachClaims, claims_conflict, pad_slots, pairwise_conflicts, world_aabb
 from tm.selection import propagate_stops, select_greedy, select_optimal
 from tm.settings import TMSettings
 
@@ -175,8 +176,9 @@ class Decision:
         ``v``'s claim of kind ``edge_kinds[e]``.
     edge_kinds : ndarray of str, shape (E,)
         One of :data:`EDGE_KINDS`.
-    claims : Claims
-        Every vehicle's claim after the decision (new for Go, current otherwise).
+    claims : Claims or ReachClaims
+        Every vehicle's claim after the decision (new for Go, current otherwise);
+        a :class:`~tm.reach.ReachClaims` from :meth:`TrafficManager.decide_reach`.
     timings : Timings
     """
 
@@ -188,7 +190,7 @@ class Decision:
     waited: np.ndarray
     edges: np.ndarray
     edge_kinds: np.ndarray
-    claims: Claims
+    claims: Claims | ReachClaims
     timings: Timings = field(repr=False)
 
     @cached_property
@@ -285,9 +287,15 @@ def _requester_conflicts(table: FamilyTable, state: FleetState, check: str) -> _
         seconds=(t1 - t0, t2 - t1, t3 - t2))
 
 
-def _result_claims(c: _Conflicts, go_r: np.ndarray) -> Claims:
+def _result_claims(c: _Conflicts, go_r: np.ndarray) -> Claims | ReachClaims:
     """Claims after the decision: new for granted requesters, current for everyone else."""
     g = c.req[go_r]
+    if isinstance(c.cur, ReachClaims):
+        K = max(c.cur.lo.shape[1], c.new.lo.shape[1])
+        cur, new = pad_slots(c.cur, K), pad_slots(c.new, K)
+        centre, heading, lo, hi = cur.centre.copy(), cur.heading.copy(), cur.lo.copy(), cur.hi.copy()
+        centre[g], heading[g], lo[g], hi[g] = new.centre[go_r], new.heading[go_r], new.lo[go_r], new.hi[go_r]
+        return ReachClaims(centre, heading, lo, hi)
     out = {}
     for name in ("centre", "index", "heading"):
         arr = getattr(c.cur, name).copy()
@@ -295,6 +303,45 @@ def _result_claims(c: _Conflicts, go_r: np.ndarray) -> Claims:
         out[name] = arr
     return Claims(c.cur.table, c.cur.family, out["centre"], out["index"], out["heading"],
                   c.cur.length, c.cur.width)
+
+
+def _reach_conflicts(state: FleetState, cur: ReachClaims, new: ReachClaims, check: str) -> _Conflicts:
+    """:func:`_requester_conflicts` for reach-tightened claims (tm/reach.py): ``cur`` holds every
+    vehicle's current claims, ``new`` the requesters' (in the order of ``state.requesting``)."""
+    t0 = time.perf_counter()
+    req = np.flatnonzero(state.requesting)
+    V, R = len(state), len(req)
+    if len(cur) != V or len(new) != R:
+        raise ValueError(f"decide_reach: {len(cur)} current claims for {V} vehicles and {len(new)} new claims "
+                         f"for {R} requesters")
+    allc = ReachClaims.concat(cur, new)
+    owner = np.concatenate([np.arange(V), req])
+    lo, hi = world_aabb(allc)
+    empty = ~(lo <= hi).all(axis=1)
+    lo, hi = np.where(empty[:, None], 0.0, lo), np.where(empty[:, None], 0.0, hi)  # never hit (narrow phase)
+    t1 = time.perf_counter()
+    a, b = broad_phase(lo, hi, GEOMETRY_TOL, mask=np.arange(V + R) >= V)
+    swap = a < V
+    a, b = np.where(swap, b, a), np.where(swap, a, b)
+    keep = owner[a] != owner[b]
+    a, b = a[keep], b[keep]
+    t2 = time.perf_counter()
+    hit = claims_conflict(allc, a, allc, b, check) if len(a) else np.zeros(0, dtype=bool)
+    a, b = a[hit], b[hit]
+    t3 = time.perf_counter()
+    i = a - V
+    b_new = b >= V
+    b_req = state.requesting[owner[b]]
+    local = np.full(V, -1, dtype=np.intp)
+    local[req] = np.arange(R)
+    kinds = np.where(b_new, "new-new", np.where(b_req, "new-old", "new-fixed"))
+    return _Conflicts(
+        req=req, cur=cur, new=new,
+        fixed_hits=np.bincount(i[~b_req], minlength=R),
+        leq=np.stack([i[b_req & ~b_new], local[owner[b[b_req & ~b_new]]]], axis=1),
+        excl=np.stack([i[b_new], b[b_new] - V], axis=1),
+        edges=np.stack([owner[a], owner[b]], axis=1), edge_kinds=kinds,
+        seconds=(t1 - t0, t2 - t1, t3 - t2))
 
 
 def _decision(state: FleetState, c: _Conflicts, go_r: np.ndarray, waited_r: np.ndarray,
@@ -397,8 +444,22 @@ class TrafficManager:
         InvariantError
             With ``settings.verify``, if the resulting claims are not pairwise disjoint.
         """
+        return self._decide(state, _requester_conflicts(self.table, state, self.settings.check))
+
+    def decide_reach(self, state: FleetState, current: ReachClaims, requested: ReachClaims) -> Decision:
+        """:meth:`decide` with reach-tightened claims (design.md §7, :mod:`tm.reach`).
+
+        ``current``: every vehicle's claims ``S_k`` for its current waypoint and state;
+        ``requested``: the requesters' claims for their requested waypoints (rows in the order
+        of ``state.requesting``).  Same policies, waiting times and conflict kinds as
+        :meth:`decide`; ``settings.check`` is ``timed`` (step k against step k) or ``union``.
+        ``decision.claims`` is then a :class:`~tm.reach.ReachClaims`.  ``state``'s centres,
+        indices and footprints are not used here (the claims hold them).
+        """
+        return self._decide(state, _reach_conflicts(state, current, requested, self.settings.check))
+
+    def _decide(self, state: FleetState, c: _Conflicts) -> Decision:
         s = self.settings
-        c = _requester_conflicts(self.table, state, s.check)
         t0 = time.perf_counter()
         req_ids = list(map(state.ids.__getitem__, c.req.tolist()))
         waited_r = np.fromiter(map(self._waited.get, req_ids, repeat(0)), dtype=np.int64, count=len(req_ids))
@@ -411,7 +472,8 @@ class TrafficManager:
         self._waited = dict(zip(compress(req_ids, stop.tolist()), (waited_r[stop] + 1).tolist()))
         decision = _decision(state, c, go_r, waited_r, time.perf_counter() - t0)
         if s.verify:
-            i, j = conflicting_pairs(decision.claims, s.check)
+            i, j = (pairwise_conflicts(decision.claims, s.check) if isinstance(decision.claims, ReachClaims)
+                    else conflicting_pairs(decision.claims, s.check))
             if len(i):
                 pairs = [(state.ids[a], state.ids[b]) for a, b in zip(i[:10], j[:10])]
                 raise InvariantError(f"{len(i)} pair(s) of claims overlap after the decision, e.g. {pairs}")

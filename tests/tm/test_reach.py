@@ -1,0 +1,206 @@
+"""Reach-tightened, time-indexed claims (tm/reach.py) and the one-lane fleet (tm/lane.py), as claims.
+
+Tolerances: positions are compared with the claim boxes with GEOMETRY_TOL (1e-9 m) of slack: the
+plant's repeated A x + B u + d and the closed-form reach A^k x ± r_k round differently by ~1e-13 m;
+the tables themselves are already rounded outward by AUTHORITY_TABLE_TOL.
+"""
+
+import numpy as np
+import pytest
+from hypothesis import assume, given, settings as hsettings, strategies as st
+
+from controllers.classes import get_class
+from controllers.settings import SynthesisSettings
+from controllers.synthesis import rotate_pairs
+from controllers.tolerances import GEOMETRY_TOL
+from tm.lane import Lane, LaneSettings, lane_class
+from tm.manager import FleetState, TrafficManager
+from tm.settings import TMSettings
+from tm.reach import ReachModel, claims_conflict, pairwise_conflicts, reach_claims
+
+URBAN = ("car", "bus", "truck")
+
+
+@pytest.fixture(scope="module")
+def lcs(tmp_path_factory):
+    s = SynthesisSettings(cache_dir=tmp_path_factory.mktemp("ma-cache"))
+    return {c: lane_class(get_class(c), s) for c in URBAN}
+
+
+def _point_model(lc):
+    """The class's claim model with a zero footprint: boxes then bound the position itself."""
+    r = lc.reach
+    return ReachModel(r.Ak_al, r.Ak_ac, r.r_al, r.r_ac, r.tables, 0.0, 0.0)
+
+
+def _disturb(m, x, u, c, policy, rng, sign):
+    lo, hi = m.d_bounds
+    if policy == "random":
+        return lo + (hi - lo) * rng.random(m.n)
+    if policy == "adversarial":
+        err = m.A @ x + m.B @ u - np.concatenate([c, np.zeros(m.n - 2)])
+        return np.where(err >= 0, hi, lo)
+    return sign * hi  # "push": every component at one vertex of D, all along the run
+
+
+@hsettings(max_examples=30, deadline=None)
+@given(c=st.sampled_from(URBAN), seed=st.integers(0, 2 ** 31), heading=st.floats(-np.pi, np.pi),
+       policy=st.sampled_from(["random", "adversarial", "push"]), sign=st.sampled_from([-1.0, 1.0]),
+       frac=st.floats(0.0, 1.0))
+def test_claims_are_sound_and_only_shrink_when_not_granted(lcs, c, seed, heading, policy, sign, frac):
+    """A random state of T^l (any l, any heading), waypoint kept: x(t+k) lies in S_k(t) for every k
+    (slot K: every later step), and S_k(t+1) ⊆ S_{k+1}(t) at every step."""
+    lc = lcs[c]
+    ctl, m, fam = lc.ctl, lc.vclass.model, lc.ctl.family
+    rng = np.random.default_rng(seed)
+    l0 = int(round(frac * fam.N))
+    E = fam.sample(l0, 1, rng)                       # road frame, error coordinates
+    cen = rng.uniform(-100, 100, (1, 2))
+    hd = np.full(1, heading)
+    X = rotate_pairs(E, hd) + np.hstack([cen, np.zeros((1, 2))])
+    l = ctl.index(X, cen, hd)
+    assume(l[0] <= fam.N)
+    pm = _point_model(lc)
+    S0 = reach_claims(pm, X, cen, hd, l)
+    prev = S0
+    K = pm.K
+    for k in range(1, K + 8):
+        U = ctl.control(X, cen, l, heading=hd)
+        Ur = rotate_pairs(U, -hd)
+        Xr = rotate_pairs(X - np.hstack([cen, np.zeros((1, 2))]), -hd)[0]
+        d = _disturb(m, Xr, Ur[0], np.zeros(2), policy, rng, sign)
+        X = X @ m.A.T + U @ m.B.T + rotate_pairs(d[None], hd)
+        l = np.minimum(ctl.index(X, cen, hd), fam.N)
+        p = rotate_pairs(X[:, :2] - cen, -hd)[0]     # position in the segment frame
+        slot = min(k, K) - 1
+        assert np.all(p >= S0.lo[0, slot] - GEOMETRY_TOL) and np.all(p <= S0.hi[0, slot] + GEOMETRY_TOL), (k, p)
+        now = reach_claims(pm, X, cen, hd, l)
+        want = prev.shift()
+        assert np.all(now.lo >= want.lo - GEOMETRY_TOL) and np.all(now.hi <= want.hi + GEOMETRY_TOL)
+        prev = now
+
+
+def test_timed_is_less_conservative_than_union_and_both_see_overlap(lcs):
+    """Two cars cruising 20 m apart: timed claims are disjoint, the union hulls meet; at 3 m both meet."""
+    lc = lcs["car"]
+    a = lc.ctl.authority
+    X = np.array([[0.0, 0, 13.8, 0], [20.0, 0, 13.8, 0]])
+    C = np.array([[a.s_ma - 4.0, 0], [20.0 + a.s_ma - 4.0, 0]])
+    l = lc.ctl.index(X, C, np.zeros(2))
+    assert np.all(l <= lc.ctl.N)
+    S = reach_claims(lc.reach, X, C, np.zeros(2), l)
+    assert not claims_conflict(S, [0], S, [1], "timed")[0]
+    assert claims_conflict(S, [0], S, [1], "union")[0]
+    X[1, 0], C[1, 0] = 3.0, 3.0 + a.s_ma - 4.0
+    S = reach_claims(lc.reach, X, C, np.zeros(2), lc.ctl.index(X, C, np.zeros(2)))
+    assert claims_conflict(S, [0], S, [1], "timed")[0] and len(pairwise_conflicts(S)[0]) == 1
+
+
+@hsettings(max_examples=12, deadline=None)
+@given(classes=st.lists(st.sampled_from(URBAN), min_size=2, max_size=5), gaps=st.lists(st.integers(4, 12), min_size=5,
+       max_size=5), check=st.sampled_from(["timed", "union"]),
+       policy=st.sampled_from(["random", "adversarial", "squeeze"]), seed=st.integers(0, 1000),
+       red=st.integers(0, 80), deny=st.booleans(), tm=st.sampled_from(["front", "greedy", "optimal"]))
+def test_random_fleets_on_a_lane_never_touch(lcs, classes, gaps, check, policy, seed, red, deny, tm):
+    """Random mixed fleets placed at rest on one lane, entries at the lane start, a red light
+    for ``red`` steps (or a TM that grants nothing), decisions front to back or by the traffic
+    manager's policies (decide_reach): after every decision and every step the claims are
+    pairwise disjoint, no two footprints overlap, the index invariant holds."""
+    lane = Lane(LaneSettings(check=check, disturbance=policy, seed=seed, policy=tm))
+    k = 40
+    for c, g in zip(classes, gaps):
+        lane.place(lcs[c], k)
+        k += g
+    assume(len(pairwise_conflicts(lane.all_claims(), check)[0]) == 0)
+    lane.stop_k = k + 5
+    lane.deny_all = deny
+    for t in range(160):
+        if t == red:
+            lane.stop_k = None
+        lane.try_enter(lcs["car"])
+        lane.step()
+    assert lane.claim_overlaps == 0 and lane.footprint_overlaps == 0 and lane.invariant_violations == 0
+    assert len(lane.vehicles) >= len(classes)
+    if not deny:
+        assert lane.grants > 0
+
+
+def test_counters_fire(lcs):
+    """Each safety counter of the lane counts: claims placed overlapping, footprints overlapping,
+    and a controller that ignores the tube (full throttle) breaks the index invariant."""
+    lane = Lane(LaneSettings(disturbance="none"))
+    lane.place(lcs["car"], 10)
+    lane.place(lcs["car"], 11)  # 3 m apart: 5 m cars overlap
+    lane.deny_all = True
+    lane.step()
+    assert lane.claim_overlaps > 0 and lane.footprint_overlaps > 0
+
+    class Reckless:  # wraps the controller, returns +ū along
+        def __init__(self, ctl):
+            self._c = ctl
+
+        def __getattr__(self, name):
+            return getattr(self._c, name)
+
+        def control(self, X, C, l, heading=None, v_cap=None):
+            return np.tile([3.0, 0.0], (len(X), 1))
+
+    lc = lcs["car"]
+    bad = type(lc)(lc.vclass, Reckless(lc.ctl), lc.reach)
+    lane = Lane(LaneSettings(disturbance="none"))
+    lane.place(bad, 10)
+    lane.deny_all = True
+    for _ in range(5):
+        lane.step()
+    assert lane.invariant_violations > 0
+
+
+def test_bad_lane_settings_are_named():
+    with pytest.raises(ValueError, match="LaneSettings.check"):
+        LaneSettings(check="both")
+    with pytest.raises(ValueError, match="LaneSettings.disturbance"):
+        LaneSettings(disturbance="gusty")
+    with pytest.raises(ValueError, match="comfort_decel"):
+        lane_class(get_class("paper-a"))
+
+
+def _state(n, requesting):
+    return FleetState(ids=[f"v{i}" for i in range(n)], family=["car"] * n, centre=np.zeros((n, 2)),
+                      index=np.zeros(n, dtype=int), heading=np.zeros(n), length=np.full(n, 5.0),
+                      width=np.full(n, 1.8), requesting=requesting, req_centre=np.zeros((n, 2)),
+                      req_index=np.zeros(n, dtype=int), req_heading=np.zeros(n))
+
+
+@pytest.mark.parametrize("policy", ["greedy", "optimal"])
+def test_decide_reach_kinds_of_conflict(lcs, policy):
+    """decide_reach on hand-made claims: a new claim that meets a non-requester's claim is denied
+    (forced); two requesters whose new claims meet cannot both go, and one whose new claim meets
+    the other's current claim needs it granted (optimal: the largest feasible set); claims after
+    the decision are disjoint (verify on)."""
+    lc = lcs["car"]
+    ctl = lc.ctl
+    tmgr = TrafficManager(TMSettings(check="timed", policy=policy, verify=True),
+                          {"car": ctl.family.position_sets}, rotating={"car"})
+    # v0 at rest on waypoint 30 (fixed, not requesting); v1 at rest 4 waypoints behind asks for 1 more
+    # -> its new claim reaches v0's; v2, v3 at rest far ahead, 3 waypoints apart, both ask for 1 more
+    X = np.array([[90.0, 0, 0, 0], [78.0, 0, 0, 0], [300.0, 0, 0, 0], [309.0, 0, 0, 0]])
+    k = np.array([30, 26, 100, 103])
+    C = np.column_stack([k * 3.0, np.zeros(4)])
+    l = ctl.index(X, C, np.zeros(4))
+    cur = reach_claims(lc.reach, X, C, np.zeros(4), l)
+    assert len(pairwise_conflicts(cur)[0]) == 0
+    req = np.array([False, True, True, True])
+    Cn = np.column_stack([(k + 1) * 3.0, np.zeros(4)])
+    Cn[1, 0] = 87.0   # v1 asks for the waypoint right behind v0: its claim reaches v0's body
+    Cn[2, 0] = 306.0  # v2 asks for v3's waypoint, v3 for one beyond: new claims meet only each other
+    ln = ctl.index(X, Cn, np.zeros(4))
+    assert np.all(ln <= ctl.N)
+    new = reach_claims(lc.reach, X[req], Cn[req], np.zeros(3), ln[req])
+    dec = tmgr.decide_reach(_state(4, req), cur, new)
+    assert not dec.go[1] and dec.forced[1]
+    assert not (dec.go[2] and dec.go[3])
+    if policy == "optimal":  # the only largest feasible set: v3 goes (v2 would need v3's old claim gone)
+        assert dec.go[3] and not dec.go[2]
+    assert len(pairwise_conflicts(dec.claims)[0]) == 0
+    kinds = set(dec.edge_kinds.tolist())
+    assert "new-fixed" in kinds
