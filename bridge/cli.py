@@ -84,7 +84,7 @@ def _cmd_run(args) -> int:
     keys = ("scenario", "baseline", "steps", "vehicles", "vehicles_total", "vehicles_arrived", "finished",
             "collisions_sumo", "collisions_geometric", "invariant_violations", "constraint_violations",
             "min_separation_m", "stop_commands", "mean_travel_time_s", "mean_delay_s", "throughput_vph",
-            "rtf", "wall_s", "error")
+            "red_violations", "rtf", "wall_s", "error")
     width = max(len(k) for k in keys)
     for k in keys:
         if k in summary:
@@ -179,6 +179,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--gui", action="store_true", help="sumo-gui (needs a display)")
     r.add_argument("--quiet", action="store_true", help="no progress bar")
     r.add_argument("--solver", choices=["exact", "daqp", "proxsuite"], default="exact")
+    r.add_argument("--signals", choices=["obey", "ignore"], default=None,
+                   help="SUMO's traffic lights: obey (default) or ignore (the TM alone, AIM-style)")
     r.add_argument("--duration", type=float, default=None, help="simulated seconds (default: until done)")
     r.add_argument("--vehicles", type=int, default=8, help="vehicles in swap")
     r.add_argument("--log", choices=["none", "summary", "full"], default="summary",

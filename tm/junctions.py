@@ -168,6 +168,22 @@ class JunctionGate:
         self.wait: dict[tuple[int, str], int] = {}
         self._meet: dict = {}  # (route key, route key) -> whether the two corridors meet
         self._routes: dict = {}  # (vehicle, zone, waypoint) -> (key, exit slot box or None, corridor lo, hi)
+        #: vehicle -> zones whose token it gave back (:meth:`give_back`): it must ask for it again
+        self.given_back: dict[str, set[int]] = {}
+
+    def give_back(self, ids) -> None:
+        """The vehicles ``ids`` (held at a red light, say) give their tokens back.
+
+        A holder that cannot move would otherwise keep every vehicle whose corridor meets its
+        own out of the zone, for as long as it stands (a red light: the whole green phase of the
+        crossing streams).  Its requests into the zone's guard then need the token again, even
+        with its current claim already in the guard; until then its claim there counts as a
+        claim already in the guard (no token through it)."""
+        for vid in ids:
+            for z, hs in enumerate(self.holders):
+                if vid in hs:
+                    del hs[vid]
+                    self.given_back.setdefault(vid, set()).add(z)
 
     # ------------------------------------------------------------------ requests
     def withhold(self, t: int, fleet: JunctionFleet, requesting: np.ndarray, new_lo: np.ndarray,
@@ -203,6 +219,10 @@ class JunctionGate:
         ci, cz = self.guards.pairs(cur_lo[r], cur_hi[r])
         Z = len(self.zones)
         fresh = ~np.isin(ni * Z + nz, ci * Z + cz)
+        if self.given_back:  # a token given back is needed again, from inside the guard too
+            again = np.array([z in self.given_back.get(ids[i], ()) for i, z in zip(r[ni].tolist(), nz.tolist())],
+                             dtype=bool).reshape(-1)
+            fresh |= again
         want = np.sort(nz[fresh] * len(r) + ni[fresh])             # grouped by zone, rows ascending
         wz, wrow = want // len(r), r[want % len(r)]
         if len(self._routes) > 100_000:  # stale (vehicle, waypoint) keys: start over
@@ -265,9 +285,13 @@ class JunctionGate:
                     continue
                 holders[cid[q]] = (key_q, lo_q, hi_q)
                 allowed[P[q]] = True
+                if cid[q] in self.given_back:
+                    self.given_back[cid[q]].discard(z)
         req[wrow[~allowed]] = False   # only a zone's holders may ask into its guard
         for key in [k for k in wait if k[1] not in pos or k[1] in self.holders[k[0]]]:
             wait.pop(key, None)
+        for vid in [v for v, zs in self.given_back.items() if v not in pos or not zs]:
+            del self.given_back[vid]
         return req
 
     def _release(self, pos: dict, cur_lo: np.ndarray, cur_hi: np.ndarray) -> None:
