@@ -135,6 +135,7 @@ def test_a_holder_held_at_red_gives_its_token_back_and_must_ask_again():
     assert both.withhold(gate, t=1) == set() and set(gate.holders[0]) == {"A"}
     gate.give_back(["A"])
     assert both.withhold(gate, t=2) == {"N"} and set(gate.holders[0]) == {"N"}
+    both.k[1] = 3  # N moved into the guard (it keeps its token there)
     both.requesting[:] = True  # green for A: it asks again, from inside the guard: N holds, A waits
     assert both.withhold(gate, t=3) == {"N"}
     assert (0, "A") in gate.wait
