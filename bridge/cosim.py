@@ -334,6 +334,8 @@ class Cosim:
         self._link_state = None
         if state is not None and len(self.signal_book):
             state = self._signals(state)
+        elif self.junctions.standing:
+            self.junctions.give_back(())
         if state is not None and self.zones:
             tg = time.perf_counter()
             state = self._gate(state)
@@ -355,14 +357,15 @@ class Cosim:
         self._link_state = read() if read is not None else None
         if self._link_state is None or not len(self._link_state):
             self._link_state = None
+            self.junctions.give_back(())
             return state
         k, speed, (row, bound, s_line, slot, front) = self._signal_lines(state.ids, state.centre, state.heading,
                                                                          state.length)
         req, held = signal_withhold(self.settings.signals, state.requesting, k, row, bound,
                                     self._link_state[slot], s_line - front[row], speed)
         self.signal_book.withheld += int(held.sum())
-        if held.any():  # a holder waiting at a red gives its junction token back (liveness)
-            self.junctions.give_back([state.ids[i] for i in np.flatnonzero(held).tolist()])
+        # vehicles standing at a red give their junction tokens back (liveness, tm.junctions)
+        self.junctions.give_back([state.ids[i] for i in np.flatnonzero(held).tolist()])
         return FleetState(ids=state.ids, family=state.family, centre=state.centre, index=state.index,
                           heading=state.heading, length=state.length, width=state.width, requesting=req,
                           req_centre=state.req_centre, req_index=state.req_index, req_heading=state.req_heading)
