@@ -139,3 +139,21 @@ def test_a_holder_held_at_red_gives_its_token_back_and_must_ask_again():
     both.requesting[:] = True  # green for A: it asks again, from inside the guard: N holds, A waits
     assert both.withhold(gate, t=3) == {"N"}
     assert (0, "A") in gate.wait
+
+
+def test_a_vehicle_standing_at_red_blocks_only_the_queue_behind_it():
+    """A stands at a red inside the guard (token given back).  B, behind it on its lane, gets no
+    token (its route runs into A's claim); C, on a lane 2.6 m beside it (corridor boxes of
+    +-1.4 m across meet A's claim box, its waypoints do not), does.  Once A no longer stands (a
+    plain claim in the guard without a token), C's corridor box meeting it is enough to keep
+    C out, as before."""
+    behind = ((-17.5, -1.6), (60.0, -1.6))
+    beside = ((-17.0, 1.0), (60.0, 1.0))
+    for standing, want in ((["A"], {"C"}), ([], set())):
+        gate = JunctionGate([J], {"car": CAR})
+        assert Scene({"A": EAST}).withhold(gate) == {"A"}
+        gate.give_back(["A"])
+        gate.give_back(standing)
+        scene = Scene({"A": EAST, "B": behind, "C": beside}, k={"A": 3}, idle=("A",))
+        assert scene.withhold(gate, t=1) == want, standing
+        assert "B" not in gate.holders[0]
