@@ -95,3 +95,23 @@ def test_signals_ignore_passes_reds_and_counts_them(tls_cfg, tmp_path, monkeypat
     assert len(watch.crossed_red) > 0                 # SUMO sees reds passed
     assert s["red_violations"] > 0                    # and muvsim's counter fires
     assert s["collisions_sumo"] == 0 and s["collisions_geometric"] == 0
+
+
+def test_stop_line_where_the_signalised_connection_leaves_its_lane(tls_cfg):
+    """East through B1 crosses one line: at the end of lane A1B1_0 (its shape's length along the
+    route, which starts at that lane's start), link 13 of light B1; a route through the
+    unsignalised A0 and B0 crosses none.  Tolerance 0.5 m: slivers and cut corners move the
+    polyline by less (bridge.waypoints.MIN_SEGMENT_M, CHAMFER_M * sin of half a small turn)."""
+    import numpy as np
+
+    from bridge.signals import LinkSlots, route_stop_lines
+    from bridge.waypoints import load_net
+
+    geo = load_net(tls_cfg.parent / "net.net.xml")
+    slots = LinkSlots()
+    r = geo.route(["A1B1", "B1C1"], 3.0, turn_max_deg=45.0)
+    lines = route_stop_lines(geo, r, r.arc_length, slots)
+    lane = geo.lane_shape("A1B1_0")
+    assert len(lines) == 1 and slots.slot == {("B1", 13): 0}
+    assert abs(lines.s_line[0] - np.hypot(*np.diff(lane, axis=0).T).sum()) < 0.5
+    assert len(route_stop_lines(geo, geo.route(["A0B0", "B0C0"], 3.0), np.zeros(1), slots)) == 0
