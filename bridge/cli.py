@@ -298,6 +298,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--gui", action="store_true", help="sumo-gui (needs a display)")
     r.add_argument("--quiet", action="store_true", help="no progress bar")
     r.add_argument("--solver", choices=["exact", "daqp", "proxsuite"], default="exact")
+    r.add_argument("--signals", choices=["obey", "ignore"], default=None,
+                   help="SUMO's traffic lights: obey (default) or ignore (the TM alone, AIM-style)")
     r.add_argument("--duration", type=_duration, default=None, metavar="S", help=DURATION_HELP)
     r.add_argument("--vehicles", type=int, default=8, help="vehicles in swap")
     r.add_argument("--log", choices=["none", "summary", "full"], default="summary",

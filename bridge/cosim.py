@@ -38,6 +38,7 @@ from tm.junctions import ClassReach, JunctionFleet, JunctionGate, Zone
 from tm.manager import FleetState, TrafficManager
 from tm.monitor import Monitor
 from tm.settings import TMSettings
+from tm.signals import SignalBook, SignalSettings, StopLines, withhold as signal_withhold
 
 __all__ = ["Zone", "VehicleSpec", "CosimSettings", "World", "FreePlaneWorld", "Cosim", "VehicleRecord"]
 
@@ -53,6 +54,8 @@ class VehicleSpec:
     waypoints: np.ndarray
     depart_s: float = 0.0
     speed_limits: np.ndarray | None = None
+    #: signalised stop lines the route crosses (positions along these waypoints), see tm.signals
+    stop_lines: StopLines | None = None
 
     @property
     def route_length_m(self) -> float:
@@ -70,8 +73,11 @@ class CosimSettings:
     seed: int = 0
     duration_s: float | None = None
     Ts: float = 0.1
+    signals: SignalSettings = field(default_factory=SignalSettings)
 
     def __post_init__(self) -> None:
+        if not isinstance(self.signals, SignalSettings):
+            raise ValueError(f"CosimSettings.signals: must be a SignalSettings, got {self.signals!r}")
         ControllerSettings(solver=self.solver, switching=self.switching)  # validates both
         if self.disturbance not in DISTURBANCES:
             raise ValueError(f"CosimSettings.disturbance: must be one of {DISTURBANCES}, "
@@ -280,6 +286,9 @@ class Cosim:
             c: ClassReach.of(f.position_sets, self.classes[c].length, self.classes[c].width,
                              self.classes[c].model.frame == "road") for c, f in self.families.items()})
         self._ms_request = self._ms_gate = 0.0  # this step's request indices and junction tokens
+        # traffic lights (tm.signals): the vehicles' stop lines; link states read once per step
+        self.signal_book = SignalBook(settings.signals)
+        self._link_state: np.ndarray | None = None
 
     # -------------------------------------------------------------- state
     def _fleet(self, with_requests: bool):
@@ -322,11 +331,59 @@ class Cosim:
         """The fleet state with every vehicle's index and request (None with no vehicle);
         requests into a junction guard without its token withheld (:meth:`_gate`)."""
         state = self._fleet(with_requests=True)
+        self._link_state = None
+        if state is not None and len(self.signal_book):
+            state = self._signals(state)
+        elif self.junctions.standing:
+            self.junctions.give_back(())
         if state is not None and self.zones:
             tg = time.perf_counter()
             state = self._gate(state)
             self._ms_gate += (time.perf_counter() - tg) * 1e3
         return state
+
+    def _signal_lines(self, ids, centre, heading, length):
+        """The fleet's stop lines (:meth:`tm.signals.SignalBook.gather`) from the groups' states."""
+        live = [g for g in self.groups.values() if g.ids]
+        pos = np.vstack([g.X[:, :2] for g in live])
+        k = np.concatenate([g.k for g in live])
+        speed = np.concatenate([np.linalg.norm(g.X[:, 2:4], axis=1) for g in live])
+        return k, speed, self.signal_book.gather(ids, k, centre, heading, pos, 0.5 * length)
+
+    def _signals(self, state: FleetState) -> FleetState:
+        """Withhold the requests that would take a vehicle past a red (or yellow with room to stop)
+        stop line (:func:`tm.signals.withhold`); nothing with ``signals.mode = ignore``."""
+        read = getattr(self.world, "link_states", None)
+        self._link_state = read() if read is not None else None
+        if self._link_state is None or not len(self._link_state):
+            self._link_state = None
+            self.junctions.give_back(())
+            return state
+        k, speed, (row, bound, s_line, slot, front) = self._signal_lines(state.ids, state.centre, state.heading,
+                                                                         state.length)
+        req, held = signal_withhold(self.settings.signals, state.requesting, k, row, bound,
+                                    self._link_state[slot], s_line - front[row], speed)
+        self.signal_book.withheld += int(held.sum())
+        # vehicles standing at a red give their junction tokens back (liveness, tm.junctions)
+        self.junctions.give_back([state.ids[i] for i in np.flatnonzero(held).tolist()])
+        return FleetState(ids=state.ids, family=state.family, centre=state.centre, index=state.index,
+                          heading=state.heading, length=state.length, width=state.width, requesting=req,
+                          req_centre=state.req_centre, req_index=state.req_index, req_heading=state.req_heading)
+
+    def _count_red_crossings(self) -> None:
+        """Front bumpers that crossed a stop line on red in this step (``red_violations``)."""
+        if self._link_state is None:
+            return
+        cur = self._fleet(with_requests=False)
+        if cur is None:
+            return
+        _, _, (row, _, s_line, slot, front) = self._signal_lines(cur.ids, cur.centre, cur.heading, cur.length)
+        self.signal_book.count_crossings(cur.ids, front, row, s_line, self._link_state[slot])
+
+    @property
+    def red_violations(self) -> int:
+        """Stop lines crossed (front bumper) while their link was red, over the run."""
+        return self.signal_book.red_violations
 
     @property
     def zone_holders(self) -> list[dict[str, tuple]]:
@@ -421,6 +478,7 @@ class Cosim:
             g.speed_sum += np.linalg.norm(g.X[:, 2:4], axis=1)
             g.steps += 1
         ms_ctl = (time.perf_counter() - tc) * 1e3
+        self._count_red_crossings()  # 4b. stop lines crossed on red (front bumpers)
         self.t += 1
         t_next = self.t * s.Ts
         # 5. arrivals
@@ -433,6 +491,7 @@ class Cosim:
                 for i in np.nonzero(done)[0]:
                     self.records[g.ids[i]].arrived_s = t_next
                     self.world.finish(g.ids[i])
+                    self.signal_book.remove(g.ids[i])
                 g.remove(done)
         # 5. admissions (condition (12)) against the claims of the vehicles now in the network
         admitted = self._admit(t_next)
@@ -509,6 +568,9 @@ class Cosim:
             H = _headings(W)
             g.add(sp.id, W, H, x0, int(g.ctl.index(x0[None], W[:1], H[:1])[0]))
             self.records[sp.id].admitted_s = t_s
+            if sp.stop_lines is not None:
+                reach = self.junctions.classes[sp.vclass].hold + 0.5 * g.vclass.length
+                self.signal_book.add(sp.id, sp.stop_lines, reach)
             self.world.insert(sp, g.vclass)
             n += 1
         if n:

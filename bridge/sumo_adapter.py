@@ -601,6 +601,13 @@ class SumoAdapter:
                 self._collision_count += 1
         self._active_pairs = active
 
+    def tls_states(self, tls_ids: Sequence[str]) -> list[str]:
+        """SUMO's current signal state string of each traffic light (one letter per link,
+        ``trafficlight.getRedYellowGreenState``: one call per light)."""
+        tl = self._need("tls_states").trafficlight
+        return [self._call(f"trafficlight.getRedYellowGreenState({t!r})", tl.getRedYellowGreenState, t)
+                for t in tls_ids]
+
     def departed_ids(self) -> tuple[str, ...]:
         """Vehicles SUMO inserted in the last step (the ones admitted before it)."""
         return self._departed

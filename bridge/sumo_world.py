@@ -28,6 +28,7 @@ from analysis.mcap_log import observers_for
 from analysis.outputs import StreamingOutputs, close_observers, write_run_tables
 from analysis.safety import verdict
 from bridge.scenarios import _write_summary
+from bridge.signals import LinkSlots, route_stop_lines
 from bridge.stopping import RunLimit, route_file_departures, run_limit, stop_reason
 from bridge.sumo_adapter import SumoAdapter, SumoError
 from bridge.sumo_inputs import InputError, headless_config, parse_xml, prepare_inputs
@@ -35,6 +36,7 @@ from bridge.waypoints import RouteError, load_net, trim_start, trim_start_index
 from controllers.classes import VehicleClass, VTypeParams, builtin_classes, vtype_class
 from controllers.tolerances import HOLD_TOL_M, HOLD_TOL_RAD
 from tm.settings import TMSettings
+from tm.signals import SignalSettings
 
 #: Gap between a departing vehicle's back and the start of its first lane (m).
 DEPART_CLEARANCE_M = 0.5
@@ -56,8 +58,9 @@ _NEVER = (1e18, 1e18, 0.0)  # pose of a vehicle not yet sent: far from any, so a
 class SumoWorld:
     """The :class:`~bridge.cosim.World` adapter over a started :class:`SumoAdapter`."""
 
-    def __init__(self, adapter: SumoAdapter, planned: dict, routes: dict):
+    def __init__(self, adapter: SumoAdapter, planned: dict, routes: dict, slots: LinkSlots | None = None):
         self.adapter = adapter
+        self.slots = slots  # the signalised links the routes cross (bridge.signals)
         self.planned = planned
         self.routes = routes
         self.lengths: dict[str, float] = {}
@@ -96,6 +99,10 @@ class SumoWorld:
         lengths = np.array([self.lengths[v] for v in mids])
         self.adapter.move(mids, front_bumper(c[mv], h[mv], lengths), sumo_angle(h[mv]))
         self._sent.update(zip(mids, np.column_stack([c[mv], h[mv]]).tolist()))
+
+    def link_states(self) -> np.ndarray | None:
+        """SUMO's state letter of every signalised link in use, one byte per slot (None: no signals)."""
+        return self.slots.states(self.adapter) if self.slots else None
 
     def finish(self, vid: str) -> None:
         self._sent.pop(vid, None)
@@ -245,9 +252,10 @@ def run_sumo(target: str, out: Path, opts) -> dict:
             check = opts.check or scenario.check
             switching = opts.switching or scenario.switching
             disturbance = opts.disturbance or scenario.disturbance
+        signals = SignalSettings(mode=getattr(opts, "signals", None) or "obey")
         summary.update(seed=seed, begin_s=begin,
                        options=dict(tm=tm, check=check, switching=switching, disturbance=disturbance,
-                                    solver=opts.solver, duration_s=opts.duration))
+                                    solver=opts.solver, duration_s=opts.duration, signals=signals.mode))
         _write_summary(out, summary)
         tripinfo = out / "tripinfo.xml"
         inputs = None
@@ -280,6 +288,7 @@ def run_sumo(target: str, out: Path, opts) -> dict:
             cls_of = _classes_for(scenario, demand, classes)
         geo = load_net(net)
         routes, specs, undrivable = {}, [], {}
+        slots = LinkSlots()
         for pv in demand.vehicles:
             c = cls_of[pv.id]
             try:
@@ -291,17 +300,22 @@ def run_sumo(target: str, out: Path, opts) -> dict:
                 s0 = 0.5 * classes[c].length + DEPART_CLEARANCE_M
                 W = trim_start(r, s0)
                 _check_drivable(pv.id, W, classes[c])
-                limits = geo.speed_limits(r)[trim_start_index(r, s0)]
+                kept = trim_start_index(r, s0)
+                limits = geo.speed_limits(r)[kept]
+                arc = r.arc_length[kept].astype(float)
+                arc[0] = min(max(s0, 0.0), 0.5 * r.length_m)  # trim_start's first point
+                lines = route_stop_lines(geo, r, arc, slots)
             except RouteError as exc:  # one vehicle never ends the run: reported, the rest run
                 undrivable[pv.id] = (pv, str(exc))
                 continue
             routes[pv.id] = r
             specs.append(VehicleSpec(id=pv.id, vclass=c, waypoints=W, depart_s=pv.depart_s - begin,
-                                     speed_limits=limits))
+                                     speed_limits=limits, stop_lines=lines))
         summary["vehicles_undrivable"] = len(undrivable)
-        world = SumoWorld(adapter, {pv.id: pv for pv in demand.vehicles if pv.id in routes}, routes)
+        world = SumoWorld(adapter, {pv.id: pv for pv in demand.vehicles if pv.id in routes}, routes, slots=slots)
         settings = CosimSettings(tm=TMSettings(policy=tm, check=check, seed=seed), switching=switching,
-                                 disturbance=disturbance, solver=opts.solver, seed=seed, duration_s=duration)
+                                 disturbance=disturbance, solver=opts.solver, seed=seed, duration_s=duration,
+                                 signals=signals)
         observers = [HaltCounter()] + observers_for(out, getattr(opts, "log", None) or "none",
                                                     {"scenario": str(target), "seed": seed, **summary["options"]})
         observers.append(StreamingOutputs(out, dict(summary)))  # last: the row is complete by then
@@ -345,6 +359,7 @@ def run_sumo(target: str, out: Path, opts) -> dict:
             summary.update(figures)
             summary.update(
                 collisions_sumo=len(sim.collisions_world),
+                red_violations=sim.red_violations, signal_withheld=sim.signal_book.withheld,
                 vehicles_total=figures["vehicles"],
                 stop_reason=stop_reason(limit, figures["vehicles"], figures["vehicles_arrived"],
                                         figures["simulated_s"]),

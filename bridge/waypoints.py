@@ -377,6 +377,11 @@ class NetGeometry:
             self._shapes[lane_id] = shp
         return shp
 
+    @property
+    def sumolib_net(self):
+        """The ``sumolib`` network (read with internal lanes), for queries this class does not wrap."""
+        return self._net
+
     def has_edge(self, edge_id: str) -> bool:
         """Whether the network has this (non-internal) edge."""
         return self._net.hasEdge(edge_id)

@@ -168,6 +168,28 @@ class JunctionGate:
         self.wait: dict[tuple[int, str], int] = {}
         self._meet: dict = {}  # (route key, route key) -> whether the two corridors meet
         self._routes: dict = {}  # (vehicle, zone, waypoint) -> (key, exit slot box or None, corridor lo, hi)
+        #: vehicle -> zones whose token it gave back (:meth:`give_back`): it must ask for it again
+        self.given_back: dict[str, set[int]] = {}
+        #: vehicles standing at a red light this step (:meth:`give_back`)
+        self.standing: set[str] = set()
+
+    def give_back(self, ids) -> None:
+        """The vehicles ``ids`` stand at a red light this step (replaces the last call's set):
+        they give their tokens back.
+
+        A holder that cannot move would otherwise keep every vehicle whose corridor meets its
+        own out of the zone, for as long as it stands (a red light: the whole green phase of the
+        crossing streams).  Its requests into the zone's guard then need the token again, even
+        with its current claim already in the guard.  A standing vehicle's claim in the guard
+        blocks a token only for a vehicle whose route runs into it (a waypoint of its corridor
+        inside that claim's box: the queue behind it), not for one whose corridor box merely
+        brushes it (the next lane, whose light is green)."""
+        self.standing = set(ids)
+        for vid in ids:
+            for z, hs in enumerate(self.holders):
+                if vid in hs:
+                    del hs[vid]
+                    self.given_back.setdefault(vid, set()).add(z)
 
     # ------------------------------------------------------------------ requests
     def withhold(self, t: int, fleet: JunctionFleet, requesting: np.ndarray, new_lo: np.ndarray,
@@ -203,6 +225,10 @@ class JunctionGate:
         ci, cz = self.guards.pairs(cur_lo[r], cur_hi[r])
         Z = len(self.zones)
         fresh = ~np.isin(ni * Z + nz, ci * Z + cz)
+        if self.given_back:  # a token given back is needed again, from inside the guard too
+            again = np.array([z in self.given_back.get(ids[i], ()) for i, z in zip(r[ni].tolist(), nz.tolist())],
+                             dtype=bool).reshape(-1)
+            fresh |= again
         want = np.sort(nz[fresh] * len(r) + ni[fresh])             # grouped by zone, rows ascending
         wz, wrow = want // len(r), r[want % len(r)]
         if len(self._routes) > 100_000:  # stale (vehicle, waypoint) keys: start over
@@ -236,9 +262,15 @@ class JunctionGate:
             # claims already in the guard that are not a holder's ("intruders"), by zone
             gi_, gz_ = self.guards.pairs(cur_lo, cur_hi)
             keep = ~np.isin(gz_ * n + gi_, holder_keys)
-            o = np.argsort(gz_[keep], kind="stable")
+            stand = np.array([ids[i] in self.standing for i in gi_.tolist()], dtype=bool).reshape(-1)
+            o = np.argsort(gz_[keep & ~stand], kind="stable")
             blocked_intr = corridor_hits(zP, wrow[P], first, c_lo, c_hi,
-                                         gz_[keep][o], gi_[keep][o], cur_lo, cur_hi)
+                                         gz_[keep & ~stand][o], gi_[keep & ~stand][o], cur_lo, cur_hi)
+            if (keep & stand).any():  # standing at a red: only routes running into its claim
+                o = np.argsort(gz_[keep & stand], kind="stable")
+                mid = 0.5 * (c_lo + c_hi)  # the corridor's waypoints
+                blocked_intr |= corridor_hits(zP, wrow[P], first, mid, mid,
+                                              gz_[keep & stand][o], gi_[keep & stand][o], cur_lo, cur_hi)
             # In order of waiting, per zone: a candidate with room beyond the zone (do not block
             # the box: a holder stuck in a queue inside the guard would stall everyone) gets a
             # token if its corridor misses every holder's, so holders never meet inside the
@@ -265,9 +297,13 @@ class JunctionGate:
                     continue
                 holders[cid[q]] = (key_q, lo_q, hi_q)
                 allowed[P[q]] = True
+                if cid[q] in self.given_back:
+                    self.given_back[cid[q]].discard(z)
         req[wrow[~allowed]] = False   # only a zone's holders may ask into its guard
         for key in [k for k in wait if k[1] not in pos or k[1] in self.holders[k[0]]]:
             wait.pop(key, None)
+        for vid in [v for v, zs in self.given_back.items() if v not in pos or not zs]:
+            del self.given_back[vid]
         return req
 
     def _release(self, pos: dict, cur_lo: np.ndarray, cur_hi: np.ndarray) -> None:
