@@ -79,7 +79,9 @@ def load_run(path) -> RunData:
         raise FileNotFoundError(f"{path}: no summary.json (not a muvsim run directory)")
     summary = json.loads(sfile.read_text())
     baseline = summary.get("baseline") == "sumo"
-    if baseline:
+    if baseline and (path / "vehicles.csv").exists():  # finished trips only, times from the window's begin
+        vehicles = pd.read_csv(path / "vehicles.csv", dtype={"id": str})
+    elif baseline:
         ti = path / "tripinfo.xml"
         if not ti.exists():
             raise FileNotFoundError(f"{path}: a --baseline sumo run without tripinfo.xml")

@@ -44,12 +44,15 @@ __all__ = ["Zone", "VehicleSpec", "CosimSettings", "World", "FreePlaneWorld", "C
 
 @dataclass(frozen=True)
 class VehicleSpec:
-    """A vehicle to run: id, class name, waypoints (K, 2) at most delta apart, departure time."""
+    """A vehicle to run: id, class name, waypoints (K, 2) at most delta apart, departure time;
+    optionally the speed limit (m/s) of the lane under each waypoint (``speed_limits``, (K,)),
+    for the controller to bound the vehicle's speed there."""
 
     id: str
     vclass: str
     waypoints: np.ndarray
     depart_s: float = 0.0
+    speed_limits: np.ndarray | None = None
 
     @property
     def route_length_m(self) -> float:

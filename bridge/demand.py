@@ -66,6 +66,9 @@ class VehicleType:
         Footprint (m).
     xml : str
         The ``<vType>`` element as read (empty for SUMO's default type).
+    accel, decel, max_speed : float, optional
+        m/s^2, m/s^2, m/s as SUMO has them (set when SUMO itself read the vType,
+        :meth:`bridge.sumo_adapter.SumoAdapter.expand_demand`).
     """
 
     id: str
@@ -73,6 +76,9 @@ class VehicleType:
     length: float
     width: float
     xml: str = ""
+    accel: float | None = None
+    decel: float | None = None
+    max_speed: float | None = None
 
 
 @dataclass(frozen=True)

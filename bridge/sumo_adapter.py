@@ -17,6 +17,12 @@ otherwise.  Waiting vehicles live only in muvsim
 a vehicle.  The delay itself is muvsim's to measure: SUMO's tripinfo counts
 ``depart`` from admission (``departDelay`` 0).
 
+For a user's ``.sumocfg`` the demand is SUMO's own: :meth:`SumoAdapter.expand_demand`
+runs the configuration once over the run's window with an always-empty network
+(each vehicle removed as SUMO inserts it) and records ids, vTypes, routes and
+requested departures; :meth:`SumoAdapter.start` then gets that demand and the
+configuration's demand-free inputs (:mod:`bridge.sumo_inputs`).
+
 SUMO options always set: ``--step-length`` (0.1 s), ``--collision.action
 warn --collision.check-junctions true --collision.mingap-factor 0`` (with the
 default action, teleport, moved vehicles report nothing), ``--no-step-log``,
@@ -73,12 +79,18 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
-from bridge.demand import Demand, DemandError, PlannedVehicle, needs_routing, read_demand
+from bridge.demand import Demand, DemandError, PlannedVehicle, VehicleType, needs_routing, read_demand
+from bridge.sumo_inputs import InputError, PreparedInputs, parse_xml
 
 __all__ = ["SumoError", "CollisionEvent", "VehicleInfo", "SumoAdapter"]
 
 BACKENDS = ("libsumo", "traci")
 _REMOVE_ARRIVED = 2  # libsumo/traci constants.REMOVE_ARRIVED
+_REMOVE_VAPORIZED = 3  # libsumo/traci constants.REMOVE_VAPORIZED
+#: SUMO's desiredMaxSpeed of bicycles (``DEFAULT_BICYCLE_SPEED``, 20 km/h): their vType's maxSpeed
+#: is 50 km/h, but SUMO drives them at most 20 km/h x speedFactor (measured: 5.89 m/s = 5.56 x 1.06
+#: alone on a 13.89 m/s road).  libsumo has no getter for desiredMaxSpeed; a vType's own one is not read.
+BICYCLE_DESIRED_MAX_SPEED = 20.0 / 3.6
 
 
 class SumoError(RuntimeError):
@@ -137,12 +149,9 @@ def _check_xml(kind: str, path: Path) -> None:
     if not path.is_file():
         raise SumoError(f"SUMO {kind} {path} does not exist")
     try:
-        for _ in ET.iterparse(path):
-            pass
-    except OSError as exc:
-        raise SumoError(f"SUMO {kind} {path} cannot be read: {exc.strerror or exc}") from None
-    except ET.ParseError as exc:
-        raise SumoError(f"SUMO {kind} {path} is not well-formed XML ({exc}); SUMO cannot load it") from None
+        parse_xml(path)  # gzipped files as SUMO reads them
+    except InputError as exc:
+        raise SumoError(f"SUMO {kind} {exc}") from None
 
 
 class SumoAdapter:
@@ -206,28 +215,35 @@ class SumoAdapter:
         return (mod.exceptions.TraCIException, mod.exceptions.FatalTraCIError, ConnectionError, OSError)
 
     def run_native(self, sumocfg: str | os.PathLike, *, duration_s: float, seed: int,
-                   tripinfo_path: str | os.PathLike) -> dict:
+                   tripinfo_path: str | os.PathLike, begin_s: float = 0.0, step_length: float | None = None,
+                   extra_args: Iterable[str] = ()) -> dict:
         """Run a configuration with SUMO's own drivers (no override): the ``--baseline sumo``.
 
-        Same collision options as :meth:`start`; returns steps, unique collision pairs and
-        the run's simulated seconds.  Raises :class:`SumoError` on SUMO's errors.
+        The window is ``begin_s .. begin_s + duration_s``; ``step_length`` None keeps the
+        configuration's own (SUMO's default 1 s if it sets none).  Same collision options as
+        :meth:`start`; returns steps, unique collision pairs and the run's simulated seconds.
+        Raises :class:`SumoError` on SUMO's errors.
         """
         mod = self._backend_module()
         errors = self._errors(mod)
-        args = ["sumo", "-c", str(sumocfg), "--step-length", "0.1", "--seed", str(seed),
+        end = begin_s + duration_s
+        args = ["sumo", "-c", str(sumocfg), "--seed", str(seed), "--begin", f"{begin_s:.10g}",
                 "--collision.action", "warn", "--collision.check-junctions", "true",
                 "--collision.mingap-factor", "0", "--tripinfo-output", str(tripinfo_path),
-                "--no-step-log", "true", "--end", str(duration_s)]
+                "--no-step-log", "true", "--end", f"{end:.10g}", *[str(a) for a in extra_args]]
+        if step_length is not None:
+            args += ["--step-length", f"{step_length:.10g}"]
         pairs: set = set()
         steps = 0
         try:
             mod.start(args)
-            while mod.simulation.getTime() < duration_s and (
+            while mod.simulation.getTime() < end - 1e-9 and (
                     steps == 0 or mod.simulation.getMinExpectedNumber() > 0):
                 mod.simulationStep()
                 steps += 1
                 for c in mod.simulation.getCollisions():
                     pairs.add(tuple(sorted((c.collider, c.victim))))
+            simulated = float(mod.simulation.getTime()) - begin_s
         except errors as exc:
             raise SumoError(f"SUMO failed running {sumocfg} with its own drivers: {exc}") from None
         finally:
@@ -235,13 +251,88 @@ class SumoAdapter:
                 mod.close()
             except errors:
                 pass
-        return {"steps": steps, "collision_pairs": sorted(pairs), "simulated_s": round(steps * 0.1, 3)}
+        return {"steps": steps, "collision_pairs": sorted(pairs), "simulated_s": round(simulated, 3)}
+
+    def expand_demand(self, sumocfg: str | os.PathLike, inputs: PreparedInputs, *, begin_s: float,
+                      end_s: float, seed: int, step_length: float, work_dir: str | os.PathLike) -> Demand:
+        """The demand of a configuration as SUMO itself expands it, inside ``begin_s .. end_s``.
+
+        SUMO runs the configuration (its own parser: gzip, route and additional files,
+        flows, ``probability`` and ``exp(...)`` draws, vType and route distributions, all
+        with ``seed``) and every vehicle is removed the moment SUMO inserts it, so the
+        network stays empty and each one departs at its requested time (one SUMO cannot
+        insert even then keeps the route it was loaded with).  Recorded per vehicle:
+        id, vType (the one drawn from a distribution), route (as routed by SUMO for trips)
+        and requested departure (``depart - departDelay``).  vTypes are read back with
+        ``vehicletype.get*`` (SUMO's defaults per vClass for what a vType leaves out).
+
+        Raises
+        ------
+        SumoError
+            SUMO refused the inputs (its message) or failed.
+        """
+        from sumo_nets.scenario import ScenarioError, read_sumocfg
+
+        try:
+            _check_xml("network", read_sumocfg(sumocfg).net)  # libsumo crashes on a broken one
+        except ScenarioError as exc:
+            raise SumoError(str(exc)) from None
+        mod = self._backend_module()
+        errors = self._errors(mod)
+        base = ["-c", str(sumocfg), *inputs.args("expansion"), "--seed", str(int(seed)),
+                "--begin", f"{begin_s:.10g}", "--step-length", f"{step_length:.10g}",
+                "--no-step-log", "true",
+                "--tripinfo-output", str(Path(work_dir) / "expansion.tripinfo.xml")]
+        # no child-process preflight: the network was checked above (what crashes libsumo) and
+        # prepare_inputs parsed every other file; SUMO's own refusals arrive as TraCIException
+        seen: dict[str, list] = {}  # id -> [requested depart, type, route, order]
+        try:
+            mod.start(["sumo", *base, "--no-warnings", "true", "--end", f"{end_s:.10g}"])
+            veh, sim = mod.vehicle, mod.simulation
+            while sim.getTime() < end_s - 1e-9:
+                mod.simulationStep()
+                now = sim.getTime()
+                departed = list(sim.getDepartedIDList())
+                now_departed = set(departed)
+                for v in sim.getLoadedIDList():  # loaded (possibly ahead of time): requested = now - delay
+                    if v not in now_departed:
+                        seen[v] = [round(now - veh.getDepartDelay(v), 6), veh.getTypeID(v), tuple(veh.getRoute(v)),
+                                   len(seen)]
+                for v in departed:  # the route as SUMO routed it (trips), then out of the network
+                    seen[v] = [round(veh.getDeparture(v) - veh.getDepartDelay(v), 6), veh.getTypeID(v),
+                               tuple(veh.getRoute(v)), seen[v][3] if v in seen else len(seen)]
+                    veh.remove(v, _REMOVE_VAPORIZED)
+            vt = mod.vehicletype
+            types = {}
+            for tid in sorted({r[1] for r in seen.values()}):
+                vclass = vt.getVehicleClass(tid)
+                vmax = float(vt.getMaxSpeed(tid))
+                if vclass == "bicycle":
+                    vmax = min(vmax, BICYCLE_DESIRED_MAX_SPEED)
+                types[tid] = VehicleType(tid, vclass, float(vt.getLength(tid)), float(vt.getWidth(tid)), "",
+                                         accel=float(vt.getAccel(tid)), decel=float(vt.getDecel(tid)),
+                                         max_speed=vmax)
+        except errors as exc:
+            raise SumoError(f"SUMO failed expanding the demand of {sumocfg}: {exc}") from None
+        finally:
+            try:
+                mod.close()
+            except errors:
+                pass
+        vehicles = []
+        for vid, (dep, tid, edges, order) in sorted(seen.items(), key=lambda kv: (kv[1][0], kv[1][3])):
+            if not (begin_s - 1e-9 <= dep < end_s - 1e-9):
+                continue
+            t = types[tid]
+            vehicles.append(PlannedVehicle(vid, tid, float(dep), edges, None, None, t.vclass, t.length, t.width))
+        return Demand(tuple(vehicles), types, tuple(Path(p) for p in inputs.expansion_routes))
 
     def start(self, sumocfg: str | os.PathLike | None = None, *, net: str | os.PathLike | None = None,
               routes: str | os.PathLike | Sequence[str | os.PathLike] | None = None, step_length: float = 0.1,
               seed: int | None = None, gui: bool = False, tripinfo_path: str | os.PathLike | None = None,
               extra_args: Iterable[str] = (), lateral_resolution: float | None = None,
-              work_dir: str | os.PathLike | None = None, preflight: bool = True) -> Demand:
+              work_dir: str | os.PathLike | None = None, preflight: bool = True,
+              demand: Demand | None = None, inputs: PreparedInputs | None = None) -> Demand:
         """Start SUMO with a configuration, or a network and route files.
 
         The vehicles of the route files are NOT given to SUMO (see the module
@@ -276,6 +367,10 @@ class SumoAdapter:
             directory removed by :meth:`close`).
         preflight : bool
             Check the command in a child ``sumo`` first (see the module notes).
+        demand, inputs : Demand and PreparedInputs, optional
+            A demand already expanded by :meth:`expand_demand` and the filtered inputs it
+            came from: SUMO is started with ``inputs``' demand-free files (vTypes, routes,
+            distributions, persons, signals kept) instead of reading the route files here.
 
         Returns
         -------
@@ -314,7 +409,7 @@ class SumoAdapter:
                 [Path(routes)] if isinstance(routes, (str, os.PathLike)) else [Path(r) for r in routes])
         additional = list(cfg.additional) if cfg_path is not None else []
         _check_xml("network", Path(net_path))
-        for r in route_paths:
+        for r in (route_paths if demand is None else []):  # an expanded demand was read by SUMO
             _check_xml("route file", Path(r))
         if work_dir is None:
             self._tmp = Path(tempfile.mkdtemp(prefix="muvsim-sumo-"))
@@ -323,7 +418,9 @@ class SumoAdapter:
             wd = Path(work_dir)
             wd.mkdir(parents=True, exist_ok=True)
         try:
-            if route_paths and needs_routing(route_paths):
+            if demand is not None:
+                pass
+            elif route_paths and needs_routing(route_paths):
                 from sumo_nets.generate import route_demand
                 from sumo_nets.sumo_tools import SumoToolError
 
@@ -331,7 +428,8 @@ class SumoAdapter:
                     route_paths = [route_demand(net_path, route_paths, wd / "routed", additional=additional)]
                 except SumoToolError as exc:
                     raise SumoError(f"cannot route the trips/flows of the demand: {exc}") from None
-            demand = read_demand(route_paths, type_files=additional)
+            if demand is None:
+                demand = read_demand(route_paths, type_files=additional)
         except DemandError as exc:
             self._cleanup_tmp()
             raise SumoError(f"cannot read the demand: {exc}") from None
@@ -355,8 +453,8 @@ class SumoAdapter:
                 self._cleanup_tmp()
                 raise SumoError(f"SUMO executable {exe.name!r} not found in {home / 'bin'} nor on PATH")
             exe = Path(found)
-        args = (["-c", str(cfg_path)] if cfg_path is not None else ["-n", str(net_path)]) + [
-            "--route-files", str(vtypes),
+        files = inputs.args("no_demand") if inputs is not None else ["--route-files", str(vtypes)]
+        args = (["-c", str(cfg_path)] if cfg_path is not None else ["-n", str(net_path)]) + files + [
             "--step-length", f"{step_length:.10g}",
             "--collision.action", "warn",
             "--collision.check-junctions", "true",

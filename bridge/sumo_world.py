@@ -15,7 +15,6 @@ import json
 import sys
 import time
 import traceback
-import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import numpy as np
@@ -29,13 +28,21 @@ from analysis.outputs import StreamingOutputs, close_observers, write_run_tables
 from analysis.safety import verdict
 from bridge.scenarios import _write_summary
 from bridge.sumo_adapter import SumoAdapter, SumoError
-from bridge.waypoints import RouteError, load_net, trim_start
-from controllers.classes import builtin_classes
+from bridge.sumo_inputs import InputError, headless_config, parse_xml, prepare_inputs
+from bridge.waypoints import RouteError, load_net, trim_start, trim_start_index
+from controllers.classes import VehicleClass, VTypeParams, builtin_classes, vtype_class
 from controllers.tolerances import HOLD_TOL_M, HOLD_TOL_RAD
 from tm.settings import TMSettings
 
 #: Gap between a departing vehicle's back and the start of its first lane (m).
 DEPART_CLEARANCE_M = 0.5
+
+#: Simulated seconds of a ``.sumocfg`` run when neither the command line nor the configuration's end says.
+DEFAULT_DURATION_S = 300.0
+#: SUMO's step length when a configuration sets none (s).
+SUMO_DEFAULT_STEP_S = 1.0
+#: SUMO's end beyond the co-simulation's window (s): muvsim, not SUMO's end, stops the run.
+END_MARGIN_S = 60.0
 
 #: Options of a user's ``.sumocfg`` run when the command line leaves them out.
 SUMOCFG_DEFAULTS = {"tm": "optimal", "check": "union", "switching": "early", "disturbance": "random"}
@@ -104,7 +111,7 @@ class SumoWorld:
 
 def junction_zones(net_path) -> list[Zone]:
     """Every junction where two or more edges enter, as a zone (its shape's bounding box)."""
-    root = ET.parse(net_path).getroot()
+    root = parse_xml(net_path).getroot()
     zones = []
     for j in root.iter("junction"):
         if j.get("type") in ("internal", "dead_end"):
@@ -144,6 +151,48 @@ def _classes_for(scenario, demand, classes, source=None):
     return out
 
 
+def _vtype_classes(demand) -> tuple[dict[str, VehicleClass], dict[str, str]]:
+    """One class per distinct vType parameter set (SUMO's own values), and each vehicle's class."""
+    classes: dict[str, VehicleClass] = {}
+    of_type: dict[str, str] = {}
+    for tid, t in demand.types.items():
+        p = VTypeParams(t.vclass, t.length, t.width, t.accel, t.decel, t.max_speed)
+        if p.name not in classes:
+            classes[p.name] = vtype_class(p)
+        of_type[tid] = p.name
+    return classes, {pv.id: of_type[pv.type_id] for pv in demand.vehicles}
+
+
+def _check_drivable(vid: str, W, vclass: VehicleClass) -> None:
+    """Raise RouteError when the waypoints break the class's turn bound (as Cosim checks it)."""
+    m = vclass.model
+    W = np.asarray(W, dtype=float)
+    if m.frame != "road" or len(W) <= 2:
+        return
+    d = np.diff(W, axis=0)
+    h = np.arctan2(d[:, 1], d[:, 0])
+    turn = np.degrees(np.abs((np.diff(h) + np.pi) % (2 * np.pi) - np.pi))
+    if np.any(turn > m.turn_max_deg + 1e-6):
+        i = int(np.argmax(turn))
+        raise RouteError(f"vehicle {vid!r}: its route turns by {turn[i]:.1f} deg at waypoint {i + 1}; class "
+                         f"{vclass.name!r} accepts at most {m.turn_max_deg} deg between segments")
+
+
+def _report_undrivable(out: Path, undrivable: dict, begin: float) -> None:
+    """Rows ``status = undrivable`` with the reason in vehicles.csv (driven vehicles: ``driven``)."""
+    import pandas as pd
+
+    path = out / "vehicles.csv"
+    df = pd.read_csv(path) if path.exists() else pd.DataFrame()
+    if "status" not in df.columns:
+        df["status"] = "driven"
+    if "reason" not in df.columns:
+        df["reason"] = ""
+    rows = pd.DataFrame([{"id": vid, "departure_s": pv.depart_s - begin, "status": "undrivable", "reason": why}
+                         for vid, (pv, why) in undrivable.items()])
+    pd.concat([df, rows], ignore_index=True).to_csv(path, index=False)
+
+
 def run_sumo(target: str, out: Path, opts) -> dict:
     """Run a SUMO scenario (built-in name, scenario TOML or .sumocfg) and write its outputs."""
     from sumo_nets.scenario import ScenarioError, load_scenario, materialise, read_sumocfg
@@ -154,14 +203,21 @@ def run_sumo(target: str, out: Path, opts) -> dict:
     _write_summary(out, summary)
     t0 = time.perf_counter()
     sim = None
+    undrivable: dict = {}
     observers: list = []
     adapter = SumoAdapter()
     try:
+        begin, cfg = 0.0, None
         if str(target).endswith(".sumocfg"):
             scenario = None
             cfg = read_sumocfg(target)
-            sumocfg, net = cfg.path, cfg.net
-            seed, duration = opts.seed, opts.duration or 300.0
+            # a copy plain sumo loads (no gui-only options); opened with the GUI as it is
+            sumocfg = cfg.path if opts.gui else headless_config(cfg.path, out / "inputs" / cfg.path.name)
+            net = cfg.net
+            # the configuration's own seed, begin and end, as plain `sumo -c` runs it
+            seed = cfg.run_seed if opts.seed is None else opts.seed
+            begin = cfg.begin_s
+            duration = opts.duration or cfg.duration_s or DEFAULT_DURATION_S
             tm, check, switching, disturbance = (getattr(opts, k) or SUMOCFG_DEFAULTS[k]
                                                  for k in ("tm", "check", "switching", "disturbance"))
         else:
@@ -174,26 +230,53 @@ def run_sumo(target: str, out: Path, opts) -> dict:
             check = opts.check or scenario.check
             switching = opts.switching or scenario.switching
             disturbance = opts.disturbance or scenario.disturbance
-        summary.update(seed=seed, options=dict(tm=tm, check=check, switching=switching, disturbance=disturbance,
-                                               solver=opts.solver, duration_s=duration))
+        summary.update(seed=seed, begin_s=begin,
+                       options=dict(tm=tm, check=check, switching=switching, disturbance=disturbance,
+                                    solver=opts.solver, duration_s=duration))
         _write_summary(out, summary)
         tripinfo = out / "tripinfo.xml"
+        inputs = None
+        if cfg is not None:
+            inputs = prepare_inputs(cfg.routes, cfg.additional, out / "inputs")
         if opts.baseline == "sumo":
-            return _run_baseline(adapter, sumocfg, tripinfo, seed, duration, out, summary, t0)
-        demand = adapter.start(sumocfg, tripinfo_path=tripinfo, seed=seed, gui=opts.gui)
-        classes = builtin_classes()
-        cls_of = _classes_for(scenario, demand, classes, source=sumocfg)
+            return _run_baseline(adapter, sumocfg, tripinfo, seed, duration, out, summary, t0, cfg=cfg,
+                                 inputs=inputs)
+        if cfg is not None:
+            # SUMO's own expansion of the demand, with the baseline's seed and step
+            demand = adapter.expand_demand(sumocfg, inputs, begin_s=begin, end_s=begin + duration, seed=seed,
+                                           step_length=cfg.step_length_s or SUMO_DEFAULT_STEP_S,
+                                           work_dir=out / "inputs")
+            demand = adapter.start(sumocfg, tripinfo_path=tripinfo, seed=seed, gui=opts.gui, demand=demand,
+                                   inputs=inputs, preflight=False,
+                                   extra_args=["--begin", f"{begin:.10g}",
+                                               "--end", f"{begin + duration + END_MARGIN_S:.10g}"])
+            classes, cls_of = _vtype_classes(demand)
+        else:
+            demand = adapter.start(sumocfg, tripinfo_path=tripinfo, seed=seed, gui=opts.gui)
+            classes = builtin_classes()
+            cls_of = _classes_for(scenario, demand, classes)
         geo = load_net(net)
-        routes, specs = {}, []
+        routes, specs, undrivable = {}, [], {}
         for pv in demand.vehicles:
             c = cls_of[pv.id]
-            r = geo.route(pv.edges, classes[c].model.delta, vclass=pv.vclass, vehicle_id=pv.id)
+            try:
+                m = classes[c].model
+                r = geo.route(pv.edges, m.delta, vclass=pv.vclass, vehicle_id=pv.id,
+                              turn_max_deg=m.turn_max_deg if m.frame == "road" else None)
+                # depart with the whole body on the first lane (SUMO's departPos="base"), not
+                # with its back half in the junction behind it
+                s0 = 0.5 * classes[c].length + DEPART_CLEARANCE_M
+                W = trim_start(r, s0)
+                _check_drivable(pv.id, W, classes[c])
+                limits = geo.speed_limits(r)[trim_start_index(r, s0)]
+            except RouteError as exc:  # one vehicle never ends the run: reported, the rest run
+                undrivable[pv.id] = (pv, str(exc))
+                continue
             routes[pv.id] = r
-            # depart with the whole body on the first lane (SUMO's departPos="base"), not
-            # with its back half in the junction behind it
-            W = trim_start(r, 0.5 * classes[c].length + DEPART_CLEARANCE_M)
-            specs.append(VehicleSpec(id=pv.id, vclass=c, waypoints=W, depart_s=pv.depart_s))
-        world = SumoWorld(adapter, {pv.id: pv for pv in demand.vehicles}, routes)
+            specs.append(VehicleSpec(id=pv.id, vclass=c, waypoints=W, depart_s=pv.depart_s - begin,
+                                     speed_limits=limits))
+        summary["vehicles_undrivable"] = len(undrivable)
+        world = SumoWorld(adapter, {pv.id: pv for pv in demand.vehicles if pv.id in routes}, routes)
         settings = CosimSettings(tm=TMSettings(policy=tm, check=check, seed=seed), switching=switching,
                                  disturbance=disturbance, solver=opts.solver, seed=seed, duration_s=duration)
         observers = [HaltCounter()] + observers_for(out, getattr(opts, "log", None) or "none",
@@ -220,7 +303,7 @@ def run_sumo(target: str, out: Path, opts) -> dict:
     except KeyboardInterrupt:
         summary["interrupted"] = True  # written below; the caller says where it stopped
         raise
-    except (ScenarioError, RouteError, SumoError) as exc:
+    except (ScenarioError, RouteError, SumoError, InputError) as exc:
         summary["error"] = f"{type(exc).__name__}: {exc}"
     except Exception as exc:
         summary.update(error=f"{type(exc).__name__}: {exc}", traceback=traceback.format_exc(limit=6))
@@ -241,21 +324,49 @@ def run_sumo(target: str, out: Path, opts) -> dict:
                 collisions_sumo=len(sim.collisions_world),
                 vehicles_total=figures["vehicles"],
                 rtf=round(sim.t * sim.settings.Ts / wall, 3) if wall > 0 else None)
+            if undrivable:
+                _report_undrivable(out, undrivable, begin)
+                summary["vehicles_total"] = figures["vehicles"] + len(undrivable)
             summary.update(verdict(summary))
         _write_summary(out, summary)
     return summary
 
 
-def _run_baseline(adapter: SumoAdapter, sumocfg, tripinfo, seed, duration, out, summary, t0) -> dict:
-    """The same demand driven by SUMO's own drivers (no muvsim control)."""
-    res = adapter.run_native(sumocfg, duration_s=duration, seed=seed, tripinfo_path=tripinfo)
+def _run_baseline(adapter: SumoAdapter, sumocfg, tripinfo, seed, duration, out, summary, t0, *, cfg=None,
+                  inputs=None) -> dict:
+    """The same demand driven by SUMO's own drivers (no muvsim control).
+
+    A user's ``.sumocfg`` (``cfg``) runs as ``sumo -c`` runs it over the window
+    ``begin .. begin + duration``: its own step length and seed, its inputs (output
+    elements of additional files dropped, ``inputs``).  Only trips SUMO finished inside the
+    window are arrivals (undeparted and unfinished ones written by
+    ``tripinfo-output.write-undeparted/-unfinished`` are not); free flow is SUMO's
+    ``duration - timeLoss`` (lanes' speed limits, the vType's maxSpeed), so delay = timeLoss >= 0.
+    Generated scenarios keep muvsim's 0.1 s step and the class speed bound.
+    """
+    if cfg is not None:
+        res = adapter.run_native(sumocfg, duration_s=duration, seed=seed, tripinfo_path=tripinfo,
+                                 begin_s=cfg.begin_s, step_length=cfg.step_length_s,
+                                 extra_args=inputs.args("expansion") if inputs is not None else ())
+    else:
+        res = adapter.run_native(sumocfg, duration_s=duration, seed=seed, tripinfo_path=tripinfo,
+                                 step_length=0.1)
     wall = time.perf_counter() - t0
-    vehicles = baseline_vehicle_table(read_tripinfo(tripinfo),
+    ti = read_tripinfo(tripinfo)
+    finished = (ti["depart_s"] >= 0) & (ti["arrival_s"] >= 0)
+    vehicles = baseline_vehicle_table(ti[finished].reset_index(drop=True),
                                       {c: vc.v_max for c, vc in builtin_classes().items()})
+    if cfg is not None:
+        vehicles["free_flow_s"] = vehicles["travel_time_s"] - vehicles["sumo_time_loss_s"]
+        vehicles["delay_s"] = vehicles["sumo_time_loss_s"]
+        vehicles["vclass"] = ti.loc[finished, "vtype"].to_numpy()
+        for c in ("departure_s", "admitted_s", "arrival_s"):  # times from the window's begin, as muvsim's
+            vehicles[c] = vehicles[c] - cfg.begin_s
     vehicles.to_csv(out / "vehicles.csv", index=False)
     arrived = vehicles["arrival_s"].notna()
     summary.update(complete=True, steps=res["steps"], simulated_s=res["simulated_s"],
                    collisions_sumo=len(res["collision_pairs"]), vehicles_arrived=int(arrived.sum()),
+                   vehicles_unfinished=int((~finished).sum()),
                    mean_travel_time_s=float(vehicles["travel_time_s"].mean()) if arrived.any() else None,
                    mean_delay_s=float(vehicles["delay_s"].mean()) if arrived.any() else None,
                    throughput_vph=round(float(arrived.sum()) * 3600.0 / res["simulated_s"], 3)

@@ -43,7 +43,13 @@ __all__ = [
     "route_waypoints",
     "subsample",
     "point_polyline_distance",
+    "drop_slivers",
+    "round_corners",
+    "refine_turns",
     "LANE_CHANGE_M",
+    "MIN_SEGMENT_M",
+    "CHAMFER_M",
+    "REVERSAL_DEG",
 ]
 
 #: Longitudinal length of a lane change, per lane crossed (m).  With 15 m (12 degrees
@@ -53,6 +59,21 @@ __all__ = [
 LANE_CHANGE_M = 30.0
 
 _DUP_TOL = 1e-9  # consecutive polyline points closer than this are merged (m)
+
+#: Polyline segments shorter than this are dropped (their end point merged into the next):
+#: where two lane shapes meet, SUMO's geometry has slivers (0.04 m on bs3d, 0.2-0.3 m on fokr)
+#: whose direction is noise - read as a 175 deg or 96 deg turn.  Moves the route by < this.
+MIN_SEGMENT_M = 0.5
+#: A short segment is a sliver only when it turns by more than this from a neighbour (deg).
+SLIVER_KINK_DEG = 30.0
+#: How far back along each side a corner is cut when it turns more than the class accepts (m):
+#: the corner's vertex is replaced by two points this far before and after it, each turning
+#: half as much; repeated until every vertex turns within the bound.  Cuts inside the corner
+#: by at most this x sin(turn / 2).
+CHAMFER_M = 1.0
+#: Vertices turning more than this are reversals, never rounded: a vehicle would have to turn
+#: on the spot (it is reported undrivable instead).
+REVERSAL_DEG = 150.0
 
 
 class RouteError(ValueError):
@@ -154,6 +175,114 @@ def point_polyline_distance(p: np.ndarray, poly: np.ndarray) -> np.ndarray:
     return np.min(np.hypot(*(p[:, None, :] - proj).transpose(2, 0, 1)), axis=1)
 
 
+def _turn_deg(a: np.ndarray, b: np.ndarray) -> float:
+    """Heading change between directions ``a`` and ``b`` (deg, 0..180)."""
+    return math.degrees(abs(math.atan2(a[0] * b[1] - a[1] * b[0], a[0] * b[0] + a[1] * b[1])))
+
+
+def drop_slivers(poly: np.ndarray, lanes: list, on: list, min_seg: float = MIN_SEGMENT_M,
+                 kink_deg: float = SLIVER_KINK_DEG) -> tuple[np.ndarray, list, list]:
+    """Drop the end points of slivers: segments shorter than ``min_seg`` that turn by more
+    than ``kink_deg`` from the segment before or after them (ends kept exactly).
+
+    Short segments of a smooth curve turn little and are kept.  ``lanes[i]``/``on[i]``
+    describe segment ``i`` (point ``i`` to ``i + 1``); a merged segment takes the lane of
+    its last part and is on no centre line.
+    """
+    n = len(poly)
+    if n <= 2:
+        return poly, lanes, on
+    keep, kl, ko = [0], [], []
+    merged = False
+    for j in range(1, n):
+        d = poly[j] - poly[keep[-1]]
+        if np.hypot(*d) < min_seg:
+            before = poly[keep[-1]] - poly[keep[-2]] if len(keep) > 1 else None
+            after = poly[j + 1] - poly[j] if j + 1 < n else None
+            kinked = (before is not None and _turn_deg(before, d) > kink_deg) or (
+                after is not None and _turn_deg(d, after) > kink_deg)
+            if kinked:
+                if j == n - 1 and len(keep) > 1:  # the end stays exact: drop the previous instead
+                    keep[-1] = j
+                    kl[-1], ko[-1] = lanes[j - 1], False
+                else:
+                    merged = True
+                continue
+        keep.append(j)
+        kl.append(lanes[j - 1])
+        ko.append(on[j - 1] and not merged)
+        merged = False
+    if len(keep) < 2:  # the whole route is one sliver: keep its ends
+        return poly[[0, -1]], [lanes[-1]], [False]
+    return poly[keep], kl, ko
+
+
+def _turns(poly: np.ndarray) -> np.ndarray:
+    d = np.diff(poly, axis=0)
+    h = np.arctan2(d[:, 1], d[:, 0])
+    return np.degrees(np.abs((np.diff(h) + np.pi) % (2 * np.pi) - np.pi))
+
+
+def round_corners(poly: np.ndarray, lanes: list, on: list, max_turn_deg: float, chamfer: float = CHAMFER_M,
+                  reversal_deg: float = REVERSAL_DEG, passes: int = 8) -> tuple[np.ndarray, list, list]:
+    """Cut every corner turning more than ``max_turn_deg`` (and at most ``reversal_deg``).
+
+    Each such vertex P between unit directions u1, u2 becomes ``P - c u1`` and ``P + c u2``
+    (``c = min(chamfer, 0.45 x` the adjacent segments)``), each turning half as much; the
+    pass repeats up to ``passes`` times.  The new middle segment is on no centre line.
+    """
+    poly = np.asarray(poly, dtype=float)
+    lanes, on = list(lanes), list(on)
+    for _ in range(passes):
+        if len(poly) < 3:
+            break
+        t = _turns(poly)
+        bad = np.flatnonzero((t > max_turn_deg + 1e-9) & (t <= reversal_deg))
+        if not len(bad):
+            break
+        seg = np.diff(poly, axis=0)
+        seg_len = np.hypot(seg[:, 0], seg[:, 1])
+        pts, nl, no = [poly[0]], [], []
+        bad_set = set((bad + 1).tolist())  # vertex indices
+        for j in range(1, len(poly)):
+            if j in bad_set:
+                u1, u2 = seg[j - 1] / seg_len[j - 1], seg[j] / seg_len[j]
+                c = min(chamfer, 0.45 * seg_len[j - 1], 0.45 * seg_len[j])
+                pts += [poly[j] - c * u1, poly[j] + c * u2]
+                nl += [lanes[j - 1], lanes[j]]
+                no += [on[j - 1], False]
+            else:
+                pts.append(poly[j])
+                nl.append(lanes[j - 1])
+                no.append(on[j - 1])
+        poly, lanes, on = np.asarray(pts), nl, no
+    return poly, lanes, on
+
+
+def refine_turns(poly: np.ndarray, wps: np.ndarray, arc: np.ndarray, max_turn_deg: float, passes: int = 8
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """Denser waypoints where the chords between them turn more than ``max_turn_deg``.
+
+    A chord across a curve turns by about its length over the curve's radius (3 m chords on
+    a 3.8 m turnaround: 45 deg), even when no polyline vertex turns that much.  At every
+    waypoint whose two chords turn more than the bound, the arc midpoints of both chords
+    become waypoints (halving the turn on an arc); repeated up to ``passes`` times.  A
+    vertex that itself turns more stays as it is (and is reported by the caller).
+    """
+    parc = _arc(poly)
+    for _ in range(passes):
+        if len(wps) < 3:
+            break
+        t = _turns(wps)
+        bad = np.flatnonzero(t > max_turn_deg + 1e-9) + 1  # waypoint indices
+        if not len(bad):
+            break
+        mids = np.concatenate([0.5 * (arc[bad - 1] + arc[bad]), 0.5 * (arc[bad] + arc[bad + 1])])
+        arc = np.union1d(arc, mids)
+        wps = np.column_stack([np.interp(arc, parc, poly[:, 0]), np.interp(arc, parc, poly[:, 1])])
+    return wps, arc
+
+
 def subsample(polyline: np.ndarray, delta: float, corner_deg: float = 30.0) -> tuple[np.ndarray, np.ndarray]:
     """Waypoints on ``polyline`` at most ``delta`` apart, corners kept.
 
@@ -252,6 +381,14 @@ class NetGeometry:
         """Whether the network has this (non-internal) edge."""
         return self._net.hasEdge(edge_id)
 
+    def lane_speed(self, lane_id: str) -> float:
+        """A lane's speed limit (m/s), internal lanes included."""
+        return float(self._net.getLane(lane_id).getSpeed())
+
+    def speed_limits(self, route: "RouteWaypoints") -> np.ndarray:
+        """The speed limit of the lane under each waypoint of ``route`` (m/s, (K,))."""
+        return np.array([self.lane_speed(lane) for lane in route.lane_ids], dtype=float)
+
     def lane_count(self, edge_id: str) -> int:
         """Number of lanes of an edge."""
         return self._net.getEdge(edge_id).getLaneNumber()
@@ -300,8 +437,8 @@ class NetGeometry:
             conns.append(cs)
         return conns
 
-    def _choose(self, edges: Sequence[str], conns: list[list[_Conn]], depart_lane: int | None
-                ) -> tuple[int, list[_Conn]]:
+    def _choose(self, edges: Sequence[str], conns: list[list[_Conn]], depart_lane: int | None,
+                vclass: str | None = None) -> tuple[int, list[_Conn]]:
         """Fewest lane changes over the route: (arrival lane on the first edge, connection per junction)."""
         m = len(edges)
         n_last = self.lane_count(edges[-1])
@@ -319,8 +456,9 @@ class NetGeometry:
             choice.insert(0, choice_k)
         if depart_lane is None:
             # free start: the lane of the cheapest first connection (no change needed on edge 0)
-            if m == 1:
-                a0 = 0
+            if m == 1:  # the lowest lane the vClass may use (lane 0 is often a sidewalk)
+                a0 = next((i for i in range(n_last) if vclass is None or
+                           self._net.getEdge(edges[0]).getLane(i).allows(vclass)), 0)
             else:
                 a0 = min(conns[0], key=lambda c: (best[1][c.to_lane], c.from_lane, c.to_lane)).from_lane
         else:
@@ -333,8 +471,8 @@ class NetGeometry:
         return a0, path
 
     def route(self, edges: Sequence[str], delta: float, *, depart_lane: int | None = None,
-              vclass: str | None = None, vehicle_id: str | None = None, corner_deg: float = 30.0
-              ) -> RouteWaypoints:
+              vclass: str | None = None, vehicle_id: str | None = None, corner_deg: float = 30.0,
+              turn_max_deg: float | None = None) -> RouteWaypoints:
         """Polyline and waypoints of a route; see the module notes.
 
         Parameters
@@ -351,6 +489,11 @@ class NetGeometry:
             For error messages.
         corner_deg : float
             See :func:`subsample`.
+        turn_max_deg : float, optional
+            The class's largest accepted turn between segments: sharper corners (up to
+            :data:`REVERSAL_DEG`) are cut (:func:`round_corners`) and vertices turning more
+            than ``turn_max_deg / 2`` become waypoints.  Slivers shorter than
+            :data:`MIN_SEGMENT_M` are always dropped (:func:`drop_slivers`).
 
         Raises
         ------
@@ -359,7 +502,7 @@ class NetGeometry:
             vehicle and both edges), or a depart lane the first edge lacks.
         """
         edges = tuple(edges)
-        key = (edges, depart_lane, vclass, float(delta), float(corner_deg))
+        key = (edges, depart_lane, vclass, float(delta), float(corner_deg), turn_max_deg)
         if key in self._memo:
             hit = self._memo[key]
             if hit.vehicle_id == vehicle_id:
@@ -370,7 +513,7 @@ class NetGeometry:
         if depart_lane is not None and not 0 <= depart_lane < self.lane_count(edges[0]):
             raise RouteError(f"{who}: depart lane {depart_lane} does not exist on edge {edges[0]!r} "
                              f"(lanes 0..{self.lane_count(edges[0]) - 1})")
-        arrive, path = self._choose(edges, conns, depart_lane)
+        arrive, path = self._choose(edges, conns, depart_lane, vclass)
 
         pieces: list[tuple[np.ndarray, str, bool]] = []  # (points, lane id, on its centre line)
         lanes_used = []
@@ -405,7 +548,13 @@ class NetGeometry:
         poly = np.asarray(pts, dtype=float)
         if len(poly) < 2:
             raise RouteError(f"{who}: route [{' '.join(edges)}] has zero length")
+        poly, seg_lane, seg_on = drop_slivers(poly, seg_lane, seg_on)
+        if turn_max_deg is not None:
+            poly, seg_lane, seg_on = round_corners(poly, seg_lane, seg_on, turn_max_deg)
+            corner_deg = min(corner_deg, 0.5 * turn_max_deg)
         wps, arc = subsample(poly, delta, corner_deg)
+        if turn_max_deg is not None:
+            wps, arc = refine_turns(poly, wps, arc, turn_max_deg)
         parc = _arc(poly)
         seg = np.clip(np.searchsorted(parc, arc, side="right") - 1, 0, len(poly) - 2)
         d = np.diff(poly, axis=0)
@@ -435,6 +584,14 @@ def load_net(net_path: str | os.PathLike) -> NetGeometry:
     except OSError as exc:
         raise FileNotFoundError(f"SUMO network {p} cannot be read: {exc.strerror or exc}") from None
     return _load_net_cached(str(p), st.st_mtime_ns, st.st_size)
+
+
+def trim_start_index(route: "RouteWaypoints", s0: float) -> np.ndarray:
+    """Indices into ``route.waypoints`` of the points :func:`trim_start` returns (its first
+    point, inside the segment ending at the first kept waypoint, takes that segment's start)."""
+    s0 = float(min(max(s0, 0.0), 0.5 * route.length_m))
+    keep = np.flatnonzero(route.arc_length > s0 + 1e-6)
+    return np.concatenate([[max(int(keep[0]) - 1, 0) if len(keep) else route.count - 1], keep])
 
 
 def trim_start(route: "RouteWaypoints", s0: float) -> np.ndarray:

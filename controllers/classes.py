@@ -13,10 +13,16 @@ from dataclasses import dataclass
 
 from controllers.models import VehicleModel, double_integrator, drag_integrator
 
-__all__ = ["VehicleClass", "builtin_classes", "get_class", "ClassError", "CITY_TURN_MAX_DEG"]
+__all__ = ["VehicleClass", "VTypeParams", "builtin_classes", "get_class", "vtype_class", "ClassError",
+           "CITY_TURN_MAX_DEG", "CITY_V_MAX", "CITY_U_MAX"]
 
 #: Largest heading change between successive route segments the urban classes accept.
 CITY_TURN_MAX_DEG = 45.0
+#: Speed bound along the road of the urban classes (m/s, 50 km/h): a vType's maxSpeed is
+#: capped by it (lane speed limits are not read yet).
+CITY_V_MAX = 13.89
+#: Largest acceleration bound along the road of a class built from a vType (m/s^2).
+CITY_U_MAX = 3.0
 
 
 class ClassError(KeyError):
@@ -55,6 +61,60 @@ class VehicleClass:
     def v_max(self) -> float:
         """Per-axis speed bound (m/s)."""
         return float(self.model.z_bounds[1][0])
+
+
+@dataclass(frozen=True)
+class VTypeParams:
+    """The parameters of a SUMO vType a vehicle class is built from (as SUMO has them,
+    its defaults per vClass filled in: read back with ``libsumo.vehicletype.get*``).
+
+    Parameters
+    ----------
+    vclass : str
+        SUMO vClass.
+    length, width : float
+        Footprint (m), > 0.
+    accel, decel : float
+        Acceleration and deceleration ability (m/s^2), > 0.
+    max_speed : float
+        Maximum speed (m/s), > 0.
+    """
+
+    vclass: str
+    length: float
+    width: float
+    accel: float
+    decel: float
+    max_speed: float
+
+    def __post_init__(self) -> None:
+        for k in ("length", "width", "accel", "decel", "max_speed"):
+            v = getattr(self, k)
+            if not (isinstance(v, (int, float)) and v > 0 and v < float("inf")):
+                raise ValueError(f"vType parameter {k}: must be a finite number > 0, got {v!r}")
+
+    @property
+    def name(self) -> str:
+        """The class name: vClass and every parameter (one class per distinct parameter set)."""
+        return (f"{self.vclass}-{self.length:g}x{self.width:g}-a{self.accel:g}-d{self.decel:g}"
+                f"-v{self.max_speed:g}")
+
+
+def vtype_class(p: VTypeParams) -> VehicleClass:
+    """A road-frame urban class built from a vType's parameters.
+
+    Footprint: exactly the vType's ``length x width`` (what SUMO moves and judges).
+    Dynamics: a double integrator in the road frame like the built-in ``car``, with the
+    speed bound along the road ``min(max_speed, CITY_V_MAX)`` and the input bound
+    ``min(accel, decel, CITY_U_MAX)`` (the model's input box is symmetric, so the smaller
+    of the two abilities bounds both); across the road as ``car``.  Its sets are
+    synthesised on first use and cached on disk by the model (:mod:`controllers.synthesis`).
+    """
+    v = round(min(p.max_speed, CITY_V_MAX), 4)
+    u = round(min(p.accel, p.decel, CITY_U_MAX), 4)
+    model = double_integrator(v_max=(v, 0.2), u_max=(u, 0.5), d_max=0.005, name=p.name, frame="road",
+                              turn_max_deg=CITY_TURN_MAX_DEG, delta=3.0)
+    return VehicleClass(p.name, model, length=float(p.length), width=float(p.width), vclass=p.vclass)
 
 
 def builtin_classes() -> dict[str, VehicleClass]:

@@ -64,6 +64,8 @@ __all__ = [
     "load_scenario",
     "materialise",
     "read_sumocfg",
+    "sumo_time",
+    "SUMO_DEFAULT_SEED",
 ]
 
 #: Vehicle classes a scenario may use unless the caller passes its own set.
@@ -338,6 +340,38 @@ class ScenarioFiles(NamedTuple):
     sumocfg: Path
 
 
+#: SUMO's seed when a configuration sets none (``sumo --help``: ``--seed INT ... default 23423``).
+SUMO_DEFAULT_SEED = 23423
+
+
+def sumo_time(text: str) -> float:
+    """A SUMO time value in seconds: ``"3600"``, ``"60.5"`` or ``"[D:]H:M:S"`` (e.g. ``"15:0:0"``).
+
+    Raises
+    ------
+    ValueError
+        Not a time SUMO accepts.
+    """
+    parts = text.strip().split(":")
+    if len(parts) > 4 or not all(p.strip() for p in parts):
+        raise ValueError(f"not a SUMO time: {text!r}")
+    vals = [float(p) for p in parts]
+    weights = (86400.0, 3600.0, 60.0, 1.0)[-len(vals):]
+    out = sum(w * v for w, v in zip(weights, vals))
+    if not math.isfinite(out):
+        raise ValueError(f"not a SUMO time: {text!r}")
+    return out
+
+
+def _sumo_bool(text: str) -> bool:
+    low = text.strip().lower()
+    if low in ("true", "1", "on", "yes", "x"):
+        return True
+    if low in ("false", "0", "off", "no", "-"):
+        return False
+    raise ValueError(text)
+
+
 class SumoConfig(NamedTuple):
     """The inputs named by a ``.sumocfg`` file (paths resolved against its directory)."""
 
@@ -345,6 +379,22 @@ class SumoConfig(NamedTuple):
     net: Path
     routes: tuple[Path, ...]
     additional: tuple[Path, ...]
+    begin_s: float = 0.0
+    end_s: float | None = None
+    seed: int | None = None
+    step_length_s: float | None = None
+    random: bool = False
+
+    @property
+    def duration_s(self) -> float | None:
+        """``end - begin`` when the configuration sets an end, else None."""
+        return None if self.end_s is None else self.end_s - self.begin_s
+
+    @property
+    def run_seed(self) -> int:
+        """The seed plain ``sumo -c`` uses: the configuration's, else SUMO's default
+        :data:`SUMO_DEFAULT_SEED` (``--random`` draws one: muvsim then uses the default too)."""
+        return SUMO_DEFAULT_SEED if self.seed is None else self.seed
 
 
 # --------------------------------------------------------------------------- loading
@@ -508,9 +558,31 @@ def read_sumocfg(path: str | os.PathLike) -> SumoConfig:
             raise ScenarioError(f"{path}: {kind} {name!r} does not exist (looked for {p})")
         return p
 
+    def one(kind: str, *tags: str, parse=float):
+        got = [e.get("value") for t in tags for e in root.iter(t) if e.get("value") is not None]
+        if not got:
+            return None
+        try:
+            return parse(got[-1])
+        except ValueError:
+            raise ScenarioError(f"{path}: <{tags[0]} value={got[-1]!r}>: {kind}") from None
+
+    begin = one("must be a time (seconds or H:M:S)", "begin", "b", parse=sumo_time)
+    end = one("must be a time (seconds or H:M:S)", "end", "e", parse=sumo_time)
+    seed = one("must be an integer >= 0", "seed", parse=int)
+    step = one("must be a number of seconds > 0", "step-length", parse=sumo_time)
+    rnd = one("must be true or false", "random", parse=_sumo_bool)
+    if seed is not None and seed < 0:
+        raise ScenarioError(f"{path}: <seed value={seed}>: must be an integer >= 0")
+    if step is not None and not step > 0:
+        raise ScenarioError(f"{path}: <step-length value={step}>: must be a number of seconds > 0")
+    if end is not None and end >= 0 and end <= (begin or 0.0):
+        raise ScenarioError(f"{path}: <end value={end:g}>: must be after begin ({begin or 0.0:g} s)")
     return SumoConfig(path=path, net=resolve("net-file", nets[0]),
                       routes=tuple(resolve("route-files", r) for r in values("route-files", "r")),
-                      additional=tuple(resolve("additional-files", a) for a in values("additional-files", "a")))
+                      additional=tuple(resolve("additional-files", a) for a in values("additional-files", "a")),
+                      begin_s=begin or 0.0, end_s=end if end is not None and end >= 0 else None, seed=seed,
+                      step_length_s=step, random=bool(rnd))
 
 
 def materialise(scenario: Scenario, work_dir: str | os.PathLike) -> ScenarioFiles:

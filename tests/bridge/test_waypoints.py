@@ -148,3 +148,71 @@ def test_subsample_keeps_corners_and_spacing():
     np.testing.assert_allclose(arc[-1], 17.0)
     with pytest.raises(ValueError, match="delta"):
         subsample(poly, 0.0)
+
+
+# --------------------------------------------------------------------------- slivers and corners
+from bridge.waypoints import CHAMFER_M, MIN_SEGMENT_M, REVERSAL_DEG, drop_slivers, round_corners  # noqa: E402
+
+
+def _turns(p):
+    d = np.diff(p, axis=0)
+    h = np.arctan2(d[:, 1], d[:, 0])
+    return np.degrees(np.abs((np.diff(h) + np.pi) % (2 * np.pi) - np.pi))
+
+
+def test_a_sliver_where_two_lane_shapes_meet_is_dropped():
+    """bs3d: a straight route with a 0.04 m segment pointing back (a 175 deg 'turn')."""
+    p = np.array([[0.0, 0.0], [50.0, 0.0], [49.96, 0.003], [100.0, 0.0]])
+    q, lanes, on = drop_slivers(p, ["a", "a", "b"], [True, True, True])
+    assert len(q) == 3 and _turns(q).max() < 1.0  # a straight line again (deg)
+    np.testing.assert_array_equal(q[[0, -1]], p[[0, -1]])
+    assert lanes == ["a", "b"] and on == [True, False]  # the merged segment is on no centre line
+
+
+def test_short_segments_of_a_smooth_curve_are_kept():
+    a = np.linspace(0, np.pi / 2, 40)  # 0.26 m steps on a 10 m radius, 2.3 deg each
+    p = np.column_stack([10 * np.cos(a), 10 * np.sin(a)])
+    q, _, _ = drop_slivers(p, ["x"] * 39, [True] * 39)
+    np.testing.assert_array_equal(q, p)
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.tuples(st.floats(0.3, 30.0), st.floats(-170.0, 170.0)), min_size=2, max_size=12),
+       st.sampled_from([30.0, 45.0, 60.0]))
+def test_round_corners_bounds_every_turn(steps, max_turn):
+    """Random polylines (segment 0.3..30 m, turns up to 170 deg): after rounding, every vertex
+    turns by at most the bound or is a reversal (> REVERSAL_DEG), ends unchanged, and no point
+    is further than CHAMFER_M from the original polyline."""
+    h, pts = 0.0, [np.zeros(2)]
+    for length, turn in steps:
+        h += np.radians(turn)
+        pts.append(pts[-1] + length * np.array([np.cos(h), np.sin(h)]))
+    p = np.array(pts)
+    n = len(p) - 1
+    q, lanes, on = round_corners(p, list(range(n)), [True] * n, max_turn)
+    t = _turns(q)
+    assert np.all((t <= max_turn + 1e-6) | (t > REVERSAL_DEG))
+    np.testing.assert_array_equal(q[[0, -1]], p[[0, -1]])
+    assert point_polyline_distance(q, p).max() <= CHAMFER_M + 1e-9
+    assert len(lanes) == len(on) == len(q) - 1
+    assert MIN_SEGMENT_M > 0
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.floats(1.5, 30.0), st.floats(30.0, 180.0), st.floats(1.0, 5.0))
+def test_refine_turns_on_tight_curves(radius, sweep_deg, delta):
+    """A smooth curve (vertices 2 deg apart, none sharp) of radius 1.5..30 m: chords delta apart
+    turn by ~delta / radius, more than 45 deg on tight ones; after refinement no waypoint turns
+    more than 45 deg, gaps stay <= delta and waypoints stay on the polyline (1e-9 m: round-off)."""
+    from bridge.waypoints import refine_turns
+
+    a = np.radians(np.arange(0.0, sweep_deg + 1e-9, 2.0))
+    p = np.column_stack([radius * np.sin(a), radius * (1 - np.cos(a))])
+    w, s = subsample(p, delta)
+    w2, s2 = refine_turns(p, w, s, 45.0)
+    assert len(w2) >= len(w)
+    if len(w2) > 2:
+        assert _turns(w2).max() <= 45.0 + 1e-9
+    assert np.hypot(*np.diff(w2, axis=0).T).max() <= delta + 1e-9
+    assert point_polyline_distance(w2, p).max() <= ON_POLYLINE_TOL
+    np.testing.assert_array_equal(w2[[0, -1]], p[[0, -1]])
