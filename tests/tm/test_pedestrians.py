@@ -35,7 +35,7 @@ def flat_table(levels=30, half=0.5):
 def test_pedestrian_on_the_crossing_blocks_a_claim_over_it_and_not_one_elsewhere():
     rule = PedestrianRule(PedestrianSettings(), [CROSSING], TS)
     t = flat_table()
-    # horizon 20 steps: reach 0.3 + 3.0 * 21 * 0.1 = 6.6 m, the pedestrian 2.6 m from the claim
+    # horizon 20 steps: reach 0.3 + 0.75 + 3.0 * 21 * 0.1 = 7.35 m, the pedestrian 2.6 m from the claim
     c = claims(t, [[0.0, 0.0], [-30.0, 0.0]], [20, 20])   # over the crossing; 30 m before it
     assert rule.withhold(c, np.array([[0.0, 4.0]])).tolist() == [True, False]
 
@@ -43,7 +43,7 @@ def test_pedestrian_on_the_crossing_blocks_a_claim_over_it_and_not_one_elsewhere
 def test_pedestrian_far_away_does_not_block():
     rule = PedestrianRule(PedestrianSettings(), [CROSSING], TS)
     c = claims(flat_table(), [[0.0, 0.0]], [3])
-    # reach at K = 3 (lag 1): 0.3 + 3.0 * 4 * 0.1 = 1.5 m; the pedestrian is 10 m from the crossing
+    # reach at K = 3 (lag 1): 0.3 + 0.75 + 3.0 * 4 * 0.1 = 2.25 m; the pedestrian is 10 m from the crossing
     assert not rule.withhold(c, np.array([[0.0, 16.0]])).any()
     assert not rule.withhold(c, np.zeros((0, 2))).any()
 
@@ -57,7 +57,7 @@ def test_pedestrian_near_a_claim_that_meets_no_walking_region_does_not_block():
 def test_reach_grows_with_the_claims_horizon():
     """A pedestrian d away from the claim and the crossing blocks exactly the claims whose horizon K
     gives reach r + v (K + lag) Ts >= d."""
-    s = PedestrianSettings(v_max=2.0, radius=0.25, lag_steps=1)
+    s = PedestrianSettings(v_max=2.0, radius=0.25, lag_steps=1, jump_m=0.5)
     rule = PedestrianRule(s, [CROSSING], TS)
     t = flat_table(60)
     # claim box: centre (0, 0), level box +-0.5 plus footprint 5 x 1.8 -> y extent +-1.4; crossing edge y = 6
@@ -65,18 +65,18 @@ def test_reach_grows_with_the_claims_horizon():
     ped = np.array([[0.0, 1.4 + d]])
     K = np.arange(1, 40)
     blocked = rule.withhold(claims(t, np.zeros((len(K), 2)), K), np.repeat(ped, 1, axis=0))
-    expect = s.radius + s.v_max * (K + s.lag_steps) * TS >= d - 1e-9
+    expect = s.radius + s.jump_m + s.v_max * (K + s.lag_steps) * TS >= d - 1e-9
     assert blocked.tolist() == expect.tolist()
     assert expect.any() and not expect.all()          # the threshold lies inside the range
     # a pedestrian off the crossing but able to reach it is as dangerous: y = 7 (1 m beyond its edge)
     far = rule.withhold(claims(t, np.zeros((len(K), 2)), K), np.array([[0.0, 7.0]]))
-    assert far.tolist() == (s.radius + s.v_max * (K + 1) * TS >= 7.0 - 1.4 - 1e-9).tolist()
+    assert far.tolist() == (s.radius + s.jump_m + s.v_max * (K + 1) * TS >= 7.0 - 1.4 - 1e-9).tolist()
 
 
 def test_hold_seconds_extend_the_horizon():
     t = flat_table()
     ped = np.array([[0.0, 1.4 + 2.0]])
-    c = claims(t, [[0.0, 0.0]], [1])                 # K = 1: reach 0.9 m < 2 m
+    c = claims(t, [[0.0, 0.0]], [1])                 # K = 1: reach 0.3 + 0.75 + 0.6 = 1.65 m < 2 m
     assert not PedestrianRule(PedestrianSettings(), [CROSSING], TS).withhold(c, ped).any()
     assert PedestrianRule(PedestrianSettings(hold_s=1.0), [CROSSING], TS).withhold(c, ped).all()
 
@@ -87,7 +87,7 @@ def test_disabled_rule_withholds_nothing():
 
 
 @pytest.mark.parametrize("kw, field", [({"v_max": -1.0}, "v_max"), ({"radius": float("nan")}, "radius"),
-                                       ({"lag_steps": 1.5}, "lag_steps"), ({"hold_s": -0.1}, "hold_s"),
+                                       ({"lag_steps": 1.5}, "lag_steps"), ({"hold_s": -0.1}, "hold_s"), ({"jump_m": -1.0}, "jump_m"),
                                        ({"enabled": 1}, "enabled")])
 def test_settings_are_validated(kw, field):
     with pytest.raises(ValueError, match=f"PedestrianSettings.{field}"):
@@ -152,7 +152,8 @@ def _case(rng):
         regions.append(box(w, h) @ R.T + rng.uniform(-8, 8, 2))
     peds = rng.uniform(-12, 12, (int(rng.integers(1, 8)), 2))
     s = PedestrianSettings(v_max=float(rng.uniform(0.5, 5.0)), radius=float(rng.uniform(0.1, 0.5)),
-                           lag_steps=int(rng.integers(0, 3)), hold_s=float(rng.choice([0.0, 0.5, 1.5])))
+                           lag_steps=int(rng.integers(0, 3)), hold_s=float(rng.choice([0.0, 0.5, 1.5])),
+                           jump_m=float(rng.uniform(0.0, 1.0)))
     return fam, c, regions, peds, s
 
 
@@ -162,7 +163,7 @@ def _granted_are_out_of_reach(fam, c, regions, peds, s) -> np.ndarray:
     for v in np.flatnonzero(~withheld):
         for k in range(1, int(rule.horizon(c.index[v])) + 1):
             S = ref_claim_sequence({"f": fam}, "f", c, v, k)      # the vehicle's footprint at t + k lies in S
-            reach = s.radius + s.v_max * (k + s.lag_steps) * TS
+            reach = s.radius + s.jump_m + s.v_max * (k + s.lag_steps) * TS
             for G in regions:
                 part = _clip(S, G)
                 for p in peds:
