@@ -58,7 +58,6 @@ def test_rule_on_the_car_waits_for_the_pedestrian_and_then_goes():
     assert sim.pedestrian_withheld > 0
     rec = sim.records["car"]
     assert rec.arrived_s is not None and rec.arrived_s > 20.0   # after the pedestrian left
-    assert rec.stopped_steps == 0 or rec.denials >= 0           # withheld requests are not TM denials
 
 
 # ------------------------------------------------------------------ real SUMO
