@@ -396,6 +396,7 @@ def _run_baseline(adapter: SumoAdapter, sumocfg, tripinfo, seed, duration, out, 
     summary.update(complete=True, steps=res["steps"], simulated_s=res["simulated_s"],
                    collisions_sumo=len(res["collision_pairs"]), vehicles_arrived=int(arrived.sum()),
                    vehicles_unfinished=int((~finished).sum()),
+                   halt_episodes=int(vehicles["halt_episodes"].sum()),  # SUMO's waitingCount, finished trips
                    mean_travel_time_s=float(vehicles["travel_time_s"].mean()) if arrived.any() else None,
                    mean_delay_s=float(vehicles["delay_s"].mean()) if arrived.any() else None,
                    throughput_vph=round(float(arrived.sum()) * 3600.0 / res["simulated_s"], 3)

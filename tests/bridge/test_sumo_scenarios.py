@@ -70,6 +70,7 @@ def test_baseline_counts_only_finished_trips_and_delay_is_never_negative(tmp_pat
     assert b["vehicles_arrived"] == finished
     v = pd.read_csv(tmp_path / "b" / "vehicles.csv")
     assert (v["delay_s"] >= 0).all() and len(v) == finished
+    assert b["halt_episodes"] == int(ti.loc[(ti["depart_s"] >= 0) & (ti["arrival_s"] >= 0), "waiting_count"].sum())
 
 
 @pytest.fixture(scope="module")
