@@ -38,7 +38,7 @@ from controllers.synthesis import synthesize
 from tm.claims import Claims
 from tm.junctions import ClassReach, JunctionFleet, JunctionGate, Zone
 from tm.manager import FleetState, TrafficManager
-from tm.pedestrians import PedestrianRule, footprint_contacts
+from tm.pedestrians import STRIPING_SPEED_FACTOR, PedestrianRule, footprint_contacts
 from tm.monitor import Monitor
 from tm.settings import TMSettings
 
@@ -342,11 +342,17 @@ class Cosim:
         get = getattr(self.world, "pedestrians", None)
         return get() if get is not None else ([], np.zeros((0, 2)))
 
+    def _ped_speed(self) -> None:
+        """Raise the rule's speed bound to the fastest pedestrian the world has seen (striping factor)."""
+        v = getattr(self.world, "ped_speed_max", 0.0)
+        self.pedestrians.raise_speed(v * STRIPING_SPEED_FACTOR)
+
     def _walkers(self, state: FleetState) -> FleetState:
         """Withhold requests whose new claim meets a walking region a pedestrian can reach in time."""
         peds = self._peds()[1]
         if not len(peds):
             return state
+        self._ped_speed()
         cur = self.tm.claims(state)
         r = np.flatnonzero(state.requesting)
         new = Claims(cur.table, cur.family[r], state.req_centre[r], state.req_index[r], state.req_heading[r],
@@ -538,6 +544,7 @@ class Cosim:
         if self.pedestrians is not None and ok.any():  # nor onto a walking region a pedestrian can reach
             peds = self._peds()[1]
             if len(peds):
+                self._ped_speed()
                 stop = ok & self.pedestrians.withhold(self.tm.claims(cand), peds)
                 self.pedestrian_withheld += int(stop.sum())
                 ok = ok & ~stop

@@ -67,6 +67,9 @@ class SumoWorld:
         self._sent: dict[str, list] = {}  # vehicle -> (x, y, heading) last sent by moveToXY
         self._held: set[str] = set()      # vehicles SUMO holds at speed 0 (see push)
         self._persons: tuple[list, np.ndarray] = ([], np.zeros((0, 2)))  # read after every step
+        self._seen: set[str] = set()
+        #: Fastest walking speed of any person so far (m/s; SUMO's person.getMaxSpeed).
+        self.ped_speed_max = 0.0
 
     def insert(self, spec: VehicleSpec, vclass) -> None:
         pv, r = self.planned[spec.id], self.routes[spec.id]
@@ -108,7 +111,12 @@ class SumoWorld:
     def step(self) -> list:
         t = time.perf_counter()
         self.adapter.step()
-        self._persons = read_persons(self.adapter._need("persons"))
+        api = self.adapter._need("persons")
+        self._persons = read_persons(api)
+        new = [p for p in self._persons[0] if p not in self._seen]
+        if new:  # each new person's own walking speed (its vType's, times its speed factor)
+            self._seen.update(new)
+            self.ped_speed_max = max([self.ped_speed_max] + [float(api.person.getMaxSpeed(p)) for p in new])
         self.step_ms = (time.perf_counter() - t) * 1e3
         return [e.pair for e in self.adapter.collisions()]
 
@@ -336,6 +344,7 @@ def run_sumo(target: str, out: Path, opts) -> dict:
                 collisions_sumo=len(sim.collisions_world),
                 pedestrian_conflicts=len(sim.pedestrian_conflicts),
                 pedestrian_withheld=sim.pedestrian_withheld,
+                pedestrian_speed_bound_mps=round(sim.pedestrians.v_max, 4),
                 vehicles_total=figures["vehicles"],
                 rtf=round(sim.t * sim.settings.Ts / wall, 3) if wall > 0 else None)
             if undrivable:

@@ -47,7 +47,11 @@ from tm.claims import Claims
 from tm.geometry import convex_hull, intersect_sat, rectangles
 
 __all__ = ["PedestrianSettings", "PedestrianRule", "footprint_contacts", "point_polygon_distance",
-           "SUMO_PED_SPEED_BOUND"]
+           "SUMO_PED_SPEED_BOUND", "STRIPING_SPEED_FACTOR"]
+
+#: Factor from a striping pedestrian's walking speed to its speed bound: lateral speed at most
+#: ``max(0.4 v, v - v_x)`` gives at most ``sqrt(1 + 0.4^2) v``.
+STRIPING_SPEED_FACTOR = math.sqrt(1.16)
 
 #: Default bound on a SUMO pedestrian's speed (m/s).  SUMO's default pedestrian type walks at
 #: ``desiredMaxSpeed`` 1.39 m/s times its speed factor, drawn from ``normc(1, 0.1, 0.2, 2)`` (at most 2):
@@ -151,11 +155,17 @@ class PedestrianRule:
         self.lo = self.regions.min(axis=1) if hulls else np.zeros((0, 2))
         self.hi = self.regions.max(axis=1) if hulls else np.zeros((0, 2))
         self.hold_steps = int(math.ceil(settings.hold_s / self.Ts - 1e-9))
+        #: The speed bound in use (m/s): ``settings.v_max``, raised by :meth:`raise_speed`.
+        self.v_max = float(settings.v_max)
+
+    def raise_speed(self, v: float) -> None:
+        """Raise the speed bound to ``v`` (m/s) if it is larger: a faster pedestrian appeared."""
+        self.v_max = max(self.v_max, float(v))
 
     def reach(self, k) -> np.ndarray:
         """``r + j + v (k + lag) Ts``: how far from its position a pedestrian's body can be at step ``k``."""
         s = self.settings
-        return s.radius + s.jump_m + s.v_max * (np.asarray(k, dtype=float) + s.lag_steps) * self.Ts
+        return s.radius + s.jump_m + self.v_max * (np.asarray(k, dtype=float) + s.lag_steps) * self.Ts
 
     def horizon(self, index: np.ndarray) -> np.ndarray:
         """Steps ``K = max(l, 1) + hold_steps`` checked for claims of index ``l``."""

@@ -209,3 +209,24 @@ def test_baseline_reports_pedestrians_delay(ped_cfg, tmp_path):
     s = sw.run_sumo(str(ped_cfg), tmp_path, _opts(baseline="sumo"))
     assert s["persons_arrived"] == 5 and s["mean_person_delay_s"] >= 0
     assert (tmp_path / "persons.csv").exists()
+
+
+def test_a_faster_pedestrian_vtype_raises_the_speed_bound(ped_cfg, tmp_path):
+    """A runner (vType maxSpeed = desiredMaxSpeed = 5 m/s, speed factor 1): the bound becomes its
+    walking speed times the striping factor sqrt(1.16), above the 3.0 m/s default."""
+    import bridge.sumo_world as sw
+    from tm.pedestrians import STRIPING_SPEED_FACTOR
+
+    d = tmp_path / "in"
+    d.mkdir()
+    (d / "n.net.xml").write_bytes((ped_cfg.parent / "n.net.xml").read_bytes())
+    (d / "r.rou.xml").write_text(
+        '<routes><vType id="runner" vClass="pedestrian" maxSpeed="5" desiredMaxSpeed="5" speedFactor="1"/>'
+        '<vType id="car" vClass="passenger" length="5" width="1.8"/>'
+        '<person id="r" type="runner" depart="0"><walk from="NC" to="CS"/></person>'
+        '<vehicle id="c" type="car" depart="0"><route edges="WC CE"/></vehicle></routes>')
+    cfg = d / "p.sumocfg"
+    cfg.write_text(ped_cfg.read_text())
+    s = sw.run_sumo(str(cfg), tmp_path / "out", _opts(duration=5.0))
+    assert s["complete"], s.get("error")
+    assert s["pedestrian_speed_bound_mps"] == pytest.approx(5.0 * STRIPING_SPEED_FACTOR, rel=1e-3)

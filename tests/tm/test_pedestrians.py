@@ -201,3 +201,12 @@ def test_point_polygon_distance():
     sq = box(1.0, 1.0)[None].repeat(3, axis=0)
     d = point_polygon_distance(sq, np.array([[0.0, 0.0], [3.0, 0.0], [4.0, 5.0]]))
     assert np.allclose(d, [0.0, 2.0, 5.0], atol=TOL)
+
+
+def test_raise_speed_only_raises_the_bound_and_the_reach():
+    rule = PedestrianRule(PedestrianSettings(v_max=2.0), [CROSSING], TS)
+    r0 = float(rule.reach(10))
+    rule.raise_speed(1.0)
+    assert rule.v_max == 2.0 and float(rule.reach(10)) == r0
+    rule.raise_speed(4.0)
+    assert rule.v_max == 4.0 and float(rule.reach(10)) == pytest.approx(r0 + 2.0 * 11 * TS, abs=TOL)
