@@ -20,6 +20,9 @@ What each counter checks (see ``SAFETY.md``):
     plus the claim violations (the tube invariant as a whole).
 ``constraint_violations``
     vehicle-steps with a state outside the class's state constraints.
+``pedestrian_conflicts``
+    unique (vehicle, person) pairs whose footprint and body (a disk, ``tm.pedestrians``) met
+    after a SUMO step, persons' positions read from SUMO (SUMO runs only).
 """
 
 from __future__ import annotations
@@ -28,7 +31,7 @@ __all__ = ["SAFETY_COUNTERS", "UNSAFE_EXIT", "verdict"]
 
 #: Every safety counter a summary may hold, in the order reports list them.
 SAFETY_COUNTERS = ("collisions_sumo", "collisions_world", "collisions_geometric", "footprint_overlaps",
-                   "claim_violations", "invariant_violations", "constraint_violations")
+                   "claim_violations", "invariant_violations", "constraint_violations", "pedestrian_conflicts")
 
 #: Exit code of ``muvsim run`` when a complete run's safety counters fired.
 UNSAFE_EXIT = 3

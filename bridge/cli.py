@@ -295,6 +295,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--disturbance", choices=["random", "adversarial", "none"], default=None)
     r.add_argument("--baseline", choices=["sumo"], default=None,
                    help="drive the same demand by SUMO itself (no muvsim control)")
+    r.add_argument("--pedestrians", choices=["guard", "ignore"], default="guard",
+                   help="guard (default): no claim over a crossing or walking area a pedestrian can reach "
+                        "in time; ignore: vehicles disregard pedestrians (comparison only)")
     r.add_argument("--gui", action="store_true", help="sumo-gui (needs a display)")
     r.add_argument("--quiet", action="store_true", help="no progress bar")
     r.add_argument("--solver", choices=["exact", "daqp", "proxsuite"], default="exact")

@@ -8,7 +8,9 @@ manager.  One step (``Ts``) is:
    current waypoint and, when it may switch (``terminal``: ``l = 0``;
    ``early``: its state lies in the next waypoint's domain), a request
    ``(l', r̄)`` w.r.t. the next waypoint; requests into a junction guard
-   without one of its tokens are withheld (liveness: :mod:`tm.junctions`);
+   without one of its tokens are withheld (liveness: :mod:`tm.junctions`),
+   and so are requests whose claim meets a walking region a pedestrian can
+   reach within its horizon (:mod:`tm.pedestrians`);
 2. the TM grants or denies the requests (:class:`tm.manager.TrafficManager`);
 3. granted vehicles switch; every vehicle applies the terminal law or the
    QP of eq. (6) (:class:`controllers.stmpc.STMPC`, vectorised per class);
@@ -23,7 +25,7 @@ manager.  One step (``Ts``) is:
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Protocol
 
 import numpy as np
@@ -36,6 +38,7 @@ from controllers.synthesis import synthesize
 from tm.claims import Claims
 from tm.junctions import ClassReach, JunctionFleet, JunctionGate, Zone
 from tm.manager import FleetState, TrafficManager
+from tm.pedestrians import STRIPING_SPEED_FACTOR, PedestrianRule, footprint_contacts
 from tm.monitor import Monitor
 from tm.settings import TMSettings
 from tm.signals import SignalBook, SignalSettings, StopLines, withhold as signal_withhold
@@ -230,8 +233,12 @@ class Cosim:
 
     def __init__(self, classes, specs, settings: CosimSettings, world=None,
                  synthesis: SynthesisSettings | None = None, zones: list[Zone] | None = None,
-                 observers: list | None = None):
+                 observers: list | None = None, pedestrians: PedestrianRule | None = None):
         self.settings = settings
+        #: The pedestrian rule (None: no pedestrians); positions come from ``world.pedestrians()``.
+        self.pedestrians = pedestrians
+        self.pedestrian_conflicts: set = set()  # unique (vehicle, person) footprint-body contacts
+        self.pedestrian_withheld = 0            # requests and admissions withheld for pedestrians
         #: Objects with ``on_step(sim, state, decision, row)``, called at the end of every
         #: step (``state``: the FleetState the TM decided on, or None with no vehicle;
         #: ``decision``: the TM's Decision or None; ``row``: the step's KPI row).
@@ -340,6 +347,8 @@ class Cosim:
             tg = time.perf_counter()
             state = self._gate(state)
             self._ms_gate += (time.perf_counter() - tg) * 1e3
+        if state is not None and self.pedestrians is not None and state.requesting.any():
+            state = self._walkers(state)
         return state
 
     def _signal_lines(self, ids, centre, heading, length):
@@ -366,9 +375,35 @@ class Cosim:
         self.signal_book.withheld += int(held.sum())
         # vehicles standing at a red give their junction tokens back (liveness, tm.junctions)
         self.junctions.give_back([state.ids[i] for i in np.flatnonzero(held).tolist()])
-        return FleetState(ids=state.ids, family=state.family, centre=state.centre, index=state.index,
-                          heading=state.heading, length=state.length, width=state.width, requesting=req,
-                          req_centre=state.req_centre, req_index=state.req_index, req_heading=state.req_heading)
+        return replace(state, requesting=req)
+
+    def _peds(self) -> tuple[list, np.ndarray]:
+        """Persons' ids and positions from the world (none if it has no pedestrians)."""
+        get = getattr(self.world, "pedestrians", None)
+        return get() if get is not None else ([], np.zeros((0, 2)))
+
+    def _ped_speed(self) -> None:
+        """Raise the rule's speed bound to the fastest pedestrian the world has seen (striping factor)."""
+        v = getattr(self.world, "ped_speed_max", 0.0)
+        self.pedestrians.raise_speed(v * STRIPING_SPEED_FACTOR)
+
+    def _walkers(self, state: FleetState) -> FleetState:
+        """Withhold requests whose new claim meets a walking region a pedestrian can reach in time."""
+        peds = self._peds()[1]
+        if not len(peds):
+            return state
+        self._ped_speed()
+        cur = self.tm.claims(state)
+        r = np.flatnonzero(state.requesting)
+        new = Claims(cur.table, cur.family[r], state.req_centre[r], state.req_index[r], state.req_heading[r],
+                     cur.length[r], cur.width[r])
+        stop = self.pedestrians.withhold(new, peds)
+        if not stop.any():
+            return state
+        self.pedestrian_withheld += int(stop.sum())
+        req = state.requesting.copy()
+        req[r[stop]] = False
+        return replace(state, requesting=req)
 
     def _count_red_crossings(self) -> None:
         """Front bumpers that crossed a stop line on red in this step (``red_violations``)."""
@@ -415,9 +450,7 @@ class Cosim:
         req = self.junctions.withhold(self.t, fleet, state.requesting, new_lo, new_hi)
         if not len(r):
             return state
-        return FleetState(ids=state.ids, family=state.family, centre=state.centre, index=state.index,
-                          heading=state.heading, length=state.length, width=state.width, requesting=req,
-                          req_centre=state.req_centre, req_index=state.req_index, req_heading=state.req_heading)
+        return replace(state, requesting=req)
 
     # -------------------------------------------------------------- one step
     def step(self) -> dict:
@@ -511,6 +544,9 @@ class Cosim:
                        min_separation_m=ms.min_separation)
         for pair in self.world.step():
             self.collisions_world.add(tuple(sorted(pair)))
+        if self.pedestrians is not None and cur is not None:  # footprints against bodies, after the step
+            self.pedestrian_conflicts |= footprint_contacts(cur.ids, pos, cur.heading, cur.length, cur.width,
+                                                            *self._peds(), self.pedestrians.settings.radius)
         row.update(active=0 if cur is None else len(cur.ids), requests=n_req, grants=n_go,
                    denials=n_req - n_go, admitted=admitted, tm_ms=round(ms_tm, 4),
                    tm_decide_ms=round(ms_decide, 4), request_ms=round(self._ms_request, 4),
@@ -558,6 +594,13 @@ class Cosim:
         ok = self.tm.admit(cur, cand)
         # nor into a junction token holder's corridor (tm.junctions)
         ok = self.junctions.admissible(ok, cand.family, cand.centre, cand.heading)
+        if self.pedestrians is not None and ok.any():  # nor onto a walking region a pedestrian can reach
+            peds = self._peds()[1]
+            if len(peds):
+                self._ped_speed()
+                stop = ok & self.pedestrians.withhold(self.tm.claims(cand), peds)
+                self.pedestrian_withheld += int(stop.sum())
+                ok = ok & ~stop
         n = 0
         for sp, a in zip(ready, ok):
             if not a:

@@ -32,9 +32,11 @@ from bridge.signals import LinkSlots, route_stop_lines
 from bridge.stopping import RunLimit, route_file_departures, run_limit, stop_reason
 from bridge.sumo_adapter import SumoAdapter, SumoError
 from bridge.sumo_inputs import InputError, headless_config, parse_xml, prepare_inputs
+from bridge.sumo_pedestrians import read_personinfo, read_persons, walk_regions
 from bridge.waypoints import RouteError, load_net, trim_start, trim_start_index
 from controllers.classes import VehicleClass, VTypeParams, builtin_classes, vtype_class
 from controllers.tolerances import HOLD_TOL_M, HOLD_TOL_RAD
+from tm.pedestrians import PedestrianRule, PedestrianSettings
 from tm.settings import TMSettings
 from tm.signals import SignalSettings
 
@@ -67,6 +69,10 @@ class SumoWorld:
         self.step_ms = 0.0
         self._sent: dict[str, list] = {}  # vehicle -> (x, y, heading) last sent by moveToXY
         self._held: set[str] = set()      # vehicles SUMO holds at speed 0 (see push)
+        self._persons: tuple[list, np.ndarray] = ([], np.zeros((0, 2)))  # read after every step
+        self._seen: set[str] = set()
+        #: Fastest walking speed of any person so far (m/s; SUMO's person.getMaxSpeed).
+        self.ped_speed_max = 0.0
 
     def insert(self, spec: VehicleSpec, vclass) -> None:
         pv, r = self.planned[spec.id], self.routes[spec.id]
@@ -112,8 +118,18 @@ class SumoWorld:
     def step(self) -> list:
         t = time.perf_counter()
         self.adapter.step()
+        api = self.adapter._need("persons")
+        self._persons = read_persons(api)
+        new = [p for p in self._persons[0] if p not in self._seen]
+        if new:  # each new person's own walking speed (its vType's, times its speed factor)
+            self._seen.update(new)
+            self.ped_speed_max = max([self.ped_speed_max] + [float(api.person.getMaxSpeed(p)) for p in new])
         self.step_ms = (time.perf_counter() - t) * 1e3
         return [e.pair for e in self.adapter.collisions()]
+
+    def pedestrians(self) -> tuple[list, np.ndarray]:
+        """Every person's id and position ``(P, 2)`` after the last step (SUMO moves them)."""
+        return self._persons
 
 
 def junction_zones(net_path) -> list[Zone]:
@@ -319,7 +335,11 @@ def run_sumo(target: str, out: Path, opts) -> dict:
         observers = [HaltCounter()] + observers_for(out, getattr(opts, "log", None) or "none",
                                                     {"scenario": str(target), "seed": seed, **summary["options"]})
         observers.append(StreamingOutputs(out, dict(summary)))  # last: the row is complete by then
-        sim = Cosim(classes, specs, settings, world=world, zones=junction_zones(net), observers=observers)
+        peds = PedestrianRule(PedestrianSettings(enabled=getattr(opts, "pedestrians", None) != "ignore"),
+                              walk_regions(net), settings.Ts)
+        summary["options"]["pedestrians"] = "guard" if peds.settings.enabled else "ignore"
+        sim = Cosim(classes, specs, settings, world=world, zones=junction_zones(net), observers=observers,
+                    pedestrians=peds)
         bar = None
         if not getattr(opts, "quiet", False):
             from tqdm import tqdm
@@ -360,6 +380,9 @@ def run_sumo(target: str, out: Path, opts) -> dict:
             summary.update(
                 collisions_sumo=len(sim.collisions_world),
                 red_violations=sim.red_violations, signal_withheld=sim.signal_book.withheld,
+                pedestrian_conflicts=len(sim.pedestrian_conflicts),
+                pedestrian_withheld=sim.pedestrian_withheld,
+                pedestrian_speed_bound_mps=round(sim.pedestrians.v_max, 4),
                 vehicles_total=figures["vehicles"],
                 stop_reason=stop_reason(limit, figures["vehicles"], figures["vehicles_arrived"],
                                         figures["simulated_s"]),
@@ -367,9 +390,24 @@ def run_sumo(target: str, out: Path, opts) -> dict:
             if undrivable:
                 _report_undrivable(out, undrivable, begin)
                 summary["vehicles_total"] = figures["vehicles"] + len(undrivable)
+            summary.update(_persons_table(out, out / "tripinfo.xml"))
             summary.update(verdict(summary))
         _write_summary(out, summary)
     return summary
+
+
+def _persons_table(out: Path, tripinfo: Path) -> dict:
+    """persons.csv (SUMO's personinfo: one row per person that finished) and the summary's figures:
+    pedestrians' delay is the walks' ``timeLoss``."""
+    try:
+        df = read_personinfo(tripinfo)
+    except Exception:  # no tripinfo written (SUMO failed early): no persons figures
+        return {}
+    df.to_csv(out / "persons.csv", index=False)
+    done = df["arrival_s"].notna()
+    return {"persons_arrived": int(done.sum()),
+            "mean_person_delay_s": float(df.loc[done, "walk_time_loss_s"].mean()) if done.any() else None,
+            "mean_person_travel_time_s": float(df.loc[done, "duration_s"].mean()) if done.any() else None}
 
 
 def _planned_demand(routes, additional):
@@ -432,5 +470,6 @@ def _run_baseline(adapter: SumoAdapter, sumocfg, tripinfo, seed, limit, out, sum
         summary["vehicles_total"] = int(total)
         summary["stop_reason"] = stop_reason(limit, summary["vehicles_total"], summary["vehicles_arrived"],
                                              res["simulated_s"])
+    summary.update(_persons_table(out, tripinfo))
     _write_summary(out, summary)
     return summary
