@@ -8,7 +8,8 @@ corridor, ramp, fkk_in, A10KW, bs3d, fokr_bs_demo) with no option but ``--durati
 180 s: the first 180 s of the configuration's window), once per driver, each in its own process
 (libsumo runs one simulation per process), and writes one row per scenario and driver: demand
 in the window, undrivable vehicles, arrivals, mean delay and travel time of the arrived, halts,
-collisions (SUMO's, geometric), invariant violations, rtf and wall time, or the run's error.
+collisions (SUMO's, geometric), invariant violations, the signals mode and red-light
+violations (muvsim's ``--signals``, default obey; ``sumo`` for SUMO's drivers), rtf and wall time, or the run's error.
 ``--quick``: cross and square, 20 s (used by the tests).  One run per row, one machine.
 """
 
@@ -26,7 +27,7 @@ import pandas as pd
 GAME = ("cross", "square", "grid6", "corridor", "ramp", "fkk_in", "A10KW", "bs3d", "fokr_bs_demo")
 COLUMNS = ["scenario", "driver", "duration_s", "complete", "demand", "undrivable", "arrived", "mean_delay_s",
            "mean_travel_time_s", "halt_episodes", "collisions_sumo", "collisions_geometric",
-           "invariant_violations", "rtf", "wall_s", "error"]
+           "invariant_violations", "signals", "red_violations", "rtf", "wall_s", "error"]
 
 
 def _row(name: str, driver: str, duration: float, out: Path, rc: int, stderr: str) -> dict:
@@ -38,7 +39,10 @@ def _row(name: str, driver: str, duration: float, out: Path, rc: int, stderr: st
             "mean_delay_s": s.get("mean_delay_s"), "mean_travel_time_s": s.get("mean_travel_time_s"),
             "halt_episodes": s.get("halt_episodes"), "collisions_sumo": s.get("collisions_sumo"),
             "collisions_geometric": s.get("collisions_geometric"),
-            "invariant_violations": s.get("invariant_violations"), "rtf": s.get("rtf"), "wall_s": s.get("wall_s"),
+            "invariant_violations": s.get("invariant_violations"),
+            # muvsim: its --signals mode (obey by default); SUMO's drivers always obey their own signals
+            "signals": (s.get("options") or {}).get("signals") or ("sumo" if driver == "sumo" else None),
+            "red_violations": s.get("red_violations"), "rtf": s.get("rtf"), "wall_s": s.get("wall_s"),
             "error": (s.get("error") or ("" if rc == 0 else stderr.strip()[-300:])).replace("\n", " ")}
 
 

@@ -11,7 +11,9 @@ the README table).  Tables:
 
 * ``traffic``: ``benchmarks/results/traffic.csv`` (``bench_traffic.py``), one row per combination;
 * ``scale``: ``benchmarks/results/scale.csv`` (``bench_scale.py``), wall seconds per simulated
-  second by component.
+  second by component;
+* ``scenarios``: ``benchmarks/results/scenarios.csv`` (``bench_scenarios.py``), one row per SUMO demo
+  scenario, muvsim beside SUMO's drivers on the same demand.
 
 Figures are rounded to their meaning (s to 0.1, counts whole, ratios to 0.01 or as measured).
 """
@@ -72,7 +74,38 @@ def scale_table(csv: Path = RESULTS / "scale.csv") -> str:
     return "\n".join(lines)
 
 
-TABLES = {"traffic": traffic_table, "scale": scale_table}
+def _pair(a, b, fmt) -> str:
+    return f"{fmt(a)} / {fmt(b)}"
+
+
+def scenarios_table(csv: Path = RESULTS / "scenarios.csv") -> str:
+    """One row per scenario: muvsim's figures beside SUMO's drivers' (the rows of ``driver`` muvsim, sumo)."""
+    df = pd.read_csv(csv, keep_default_na=True)
+    head = ("| scenario | window (s) | demand | arrived muvsim / SUMO | mean delay muvsim / SUMO (s) "
+            "| SUMO collisions muvsim / SUMO | geometric, invariant (muvsim) | undrivable (muvsim) "
+            "| signals (muvsim), red crossings | rtf muvsim / SUMO | error |")
+    lines = [head, "| " + " | ".join(["---"] * 11) + " |"]
+    for name in dict.fromkeys(df["scenario"]):  # the CSV's order
+        rows = df[df["scenario"] == name].set_index("driver")
+        m = rows.loc["muvsim"] if "muvsim" in rows.index else pd.Series(dtype=object)
+        b = rows.loc["sumo"] if "sumo" in rows.index else pd.Series(dtype=object)
+        g = lambda r, k: r.get(k) if k in r else None  # noqa: E731 - a missing driver or column: "-"
+        errors = "; ".join(f"{d}: {str(g(r, 'error'))[:120]}" for d, r in (("muvsim", m), ("sumo", b))
+                           if isinstance(g(r, "error"), str) and g(r, "error").strip())
+        signals = g(m, "signals")
+        signals = signals if isinstance(signals, str) else "-"
+        lines.append(
+            f"| {name} | {_count(g(m, 'duration_s') if g(m, 'duration_s') is not None else g(b, 'duration_s'))} "
+            f"| {_count(g(m, 'demand'))} | {_pair(g(m, 'arrived'), g(b, 'arrived'), _count)} "
+            f"| {_pair(g(m, 'mean_delay_s'), g(b, 'mean_delay_s'), lambda v: _f(v, 1))} "
+            f"| {_pair(g(m, 'collisions_sumo'), g(b, 'collisions_sumo'), _count)} "
+            f"| {_count(g(m, 'collisions_geometric'))}, {_count(g(m, 'invariant_violations'))} "
+            f"| {_count(g(m, 'undrivable'))} | {signals}, {_count(g(m, 'red_violations'))} "
+            f"| {_pair(g(m, 'rtf'), g(b, 'rtf'), lambda v: _f(v, 2))} | {errors or '-'} |")
+    return "\n".join(lines)
+
+
+TABLES = {"traffic": traffic_table, "scale": scale_table, "scenarios": scenarios_table}
 
 
 def render(text: str) -> str:

@@ -33,3 +33,40 @@ def test_a_changed_csv_changes_the_table_and_the_check_catches_it(tmp_path):
     readme.write_text((ROOT / "README.md").read_text(encoding="utf-8").replace("| 14 | 344.6 /", "| 4 | 306 /", 1))
     assert m.main(["--check", "--readme", str(readme)]) == 1  # a hand-edited figure is caught
     assert m.main(["--readme", str(readme)]) == 0 and m.main(["--check", "--readme", str(readme)]) == 0
+
+
+def test_the_scenario_table_is_scenarios_csv_and_the_check_catches_a_hand_edit(tmp_path):
+    m = _mod()
+    df = pd.read_csv(ROOT / "benchmarks" / "results" / "scenarios.csv")
+    for col in ("signals", "error", "red_violations"):  # empty in the CSV (read as float) or absent
+        df[col] = df[col].astype(object) if col in df else None
+    first = df["scenario"].iloc[0]
+    mu = (df["scenario"] == first) & (df["driver"] == "muvsim")
+    su = (df["scenario"] == first) & (df["driver"] == "sumo")
+    df.loc[mu, "arrived"], df.loc[su, "arrived"] = 71, 83
+    df.loc[mu, "mean_delay_s"], df.loc[su, "mean_delay_s"] = 123.456, 7.04
+    df.loc[mu, "red_violations"], df.loc[mu, "signals"] = 5, "ignore"
+    df.loc[su, "error"] = "SumoError: boom"
+    csv = tmp_path / "scenarios.csv"
+    df.to_csv(csv, index=False)
+    row = next(line for line in m.scenarios_table(csv).splitlines() if line.startswith(f"| {first} |"))
+    cells = [c.strip() for c in row.strip("|").split("|")]
+    assert cells[3] == "71 / 83" and cells[4] == "123.5 / 7.0"  # delays to 0.1 s
+    assert cells[8] == "ignore, 5" and cells[10] == "sumo: SumoError: boom"
+    # the README's own scenario table is the rendered one: a hand-edited figure is caught, re-rendering fixes it
+    readme = tmp_path / "README.md"
+    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    ours = next(line for line in m.scenarios_table().splitlines() if line.startswith(f"| {first} |"))
+    assert ours in text
+    readme.write_text(text.replace(ours, ours.replace(f"| {first} |", f"| {first} | 1", 1), 1), encoding="utf-8")
+    assert m.main(["--check", "--readme", str(readme)]) == 1
+    assert m.main(["--readme", str(readme)]) == 0 and m.main(["--check", "--readme", str(readme)]) == 0
+
+
+def test_a_scenario_with_only_one_driver_renders_dashes_not_a_crash(tmp_path):
+    m = _mod()
+    csv = tmp_path / "scenarios.csv"
+    pd.DataFrame([{"scenario": "cross", "driver": "muvsim", "duration_s": 20.0, "demand": 9, "arrived": 2,
+                   "mean_delay_s": float("nan"), "collisions_sumo": 0, "rtf": 1.5, "error": ""}]).to_csv(csv, index=False)
+    row = m.scenarios_table(csv).splitlines()[2]
+    assert row.startswith("| cross | 20 | 9 | 2 / - | - / - | 0 / - |") and row.endswith("| 1.50 / - | - |")

@@ -21,6 +21,8 @@ def test_scenarios_benchmark_quick_mode_writes_its_table(tmp_path):
     assert df["complete"].all() and (df["collisions_sumo"] == 0).all()
     m = df[df["driver"] == "muvsim"].set_index("scenario")
     assert (m["demand"] > 0).all() and (m["invariant_violations"] == 0).all()
+    # lights obeyed by default, and the run's red-light counter recorded (cross is signalised)
+    assert (m["signals"] == "obey").all() and (m["red_violations"] == 0).all()
     # both drivers of a scenario share one demand (SUMO's expansion in the window)
     assert (df.groupby("scenario")["demand"].nunique() == 1).all()
     # the figures are the runs' own
