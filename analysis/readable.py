@@ -21,7 +21,8 @@ COUNT_STATISTICS = ("count", "pairs", "pair_steps", "value_count")
 _COUNT_NAMES = ("vehicles", "vehicles_total", "vehicles_arrived", "steps", "collisions_sumo", "collisions_world",
                 "collisions_geometric", "invariant_violations", "constraint_violations", "stop_commands",
                 "stop_episodes", "halt_episodes", "denials", "seed", "vehicles_censored", "vehicles_paired",
-                "demand_seed")
+                "demand_seed", "red_violations", "signal_withheld", "pedestrian_conflicts", "pedestrian_withheld",
+                "persons_arrived", "vehicles_undrivable", "claim_violations", "footprint_overlaps")
 
 
 def decimals_for(name: str, statistic: str = "") -> int:

@@ -166,3 +166,15 @@ def test_baseline_run_is_read_from_tripinfo(tmp_path):
     (base / "tripinfo.xml").write_text(f"<tripinfos>{moved}</tripinfos>")
     with pytest.raises(DemandMismatch, match="different requested departures"):
         report_table(load_run(a), load_run(base))
+
+
+def test_closing_table_prints_every_safety_and_rule_counter_as_an_integer():
+    """Counters are counts: 0, 7, never 0.00 or 7.00 (a float that equals an int included)."""
+    from analysis.readable import fmt
+
+    for name in ("red_violations", "signal_withheld", "pedestrian_conflicts", "pedestrian_withheld",
+                 "persons_arrived", "vehicles_undrivable", "claim_violations", "footprint_overlaps",
+                 "collisions_sumo", "invariant_violations"):
+        assert fmt(7.0, name) == "7", name
+        assert fmt(0, name) == "0", name
+    assert fmt(0.5, "min_separation_m") == "0.50"  # a length keeps its decimals
