@@ -20,6 +20,9 @@ What each counter checks (see ``SAFETY.md``):
     plus the claim violations (the tube invariant as a whole).
 ``constraint_violations``
     vehicle-steps with a state outside the class's state constraints.
+``tube_escapes``
+    vehicle-steps (movement-authority mode) whose position ``x(t+1)`` left the position part
+    of its claim ``S_1(t)`` after the decision (reach-tightened claims).
 """
 
 from __future__ import annotations
@@ -28,7 +31,8 @@ __all__ = ["SAFETY_COUNTERS", "UNSAFE_EXIT", "verdict"]
 
 #: Every safety counter a summary may hold, in the order reports list them.
 SAFETY_COUNTERS = ("collisions_sumo", "collisions_world", "collisions_geometric", "footprint_overlaps",
-                   "claim_violations", "invariant_violations", "constraint_violations")
+                   "claim_violations", "invariant_violations", "constraint_violations",
+                   "tube_escapes")
 
 #: Exit code of ``muvsim run`` when a complete run's safety counters fired.
 UNSAFE_EXIT = 3
