@@ -301,6 +301,7 @@ def run_tables(sim, tripinfo=None) -> tuple[dict, pd.DataFrame, pd.DataFrame]:
         invariant_violations=int(sim.invariant_violations + sim.monitor.claim_violations),
         claim_violations=int(sim.monitor.claim_violations),
         footprint_overlaps=int(sim.monitor.footprint_overlaps),
+        tube_escapes=int(getattr(sim.monitor, "tube_escapes", 0)),
         constraint_violations=int(sim.constraint_violations))
     from analysis.safety import verdict
 

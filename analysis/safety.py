@@ -23,6 +23,9 @@ What each counter checks (see ``SAFETY.md``):
 ``pedestrian_conflicts``
     unique (vehicle, person) pairs whose footprint and body (a disk, ``tm.pedestrians``) met
     after a SUMO step, persons' positions read from SUMO (SUMO runs only).
+``tube_escapes``
+    vehicle-steps (movement-authority mode) whose position ``x(t+1)`` left the position part
+    of its claim ``S_1(t)`` after the decision (reach-tightened claims).
 """
 
 from __future__ import annotations
@@ -31,7 +34,8 @@ __all__ = ["SAFETY_COUNTERS", "UNSAFE_EXIT", "verdict"]
 
 #: Every safety counter a summary may hold, in the order reports list them.
 SAFETY_COUNTERS = ("collisions_sumo", "collisions_world", "collisions_geometric", "footprint_overlaps",
-                   "claim_violations", "invariant_violations", "constraint_violations", "pedestrian_conflicts")
+                   "claim_violations", "invariant_violations", "constraint_violations", "pedestrian_conflicts",
+                   "tube_escapes")
 
 #: Exit code of ``muvsim run`` when a complete run's safety counters fired.
 UNSAFE_EXIT = 3

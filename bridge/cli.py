@@ -111,6 +111,8 @@ def _cmd_run(args) -> int:
     if problem:
         print(f"muvsim run: {problem}", file=sys.stderr)
         return 2
+    if getattr(args, "vclass", "paper-a") is None:
+        args.vclass = "car" if getattr(args, "controller", "paper") == "authority" else "paper-a"
     if args.scenario in FREE_PLANE:
         for name, default in (("tm", "optimal"), ("check", "union"), ("switching", "early"),
                               ("disturbance", "random")):
@@ -288,7 +290,12 @@ def build_parser() -> argparse.ArgumentParser:
                         "scenario: single, paper10, swap, crossing")
     r.add_argument("--out", default="runs/latest", help="output directory (default runs/latest)")
     r.add_argument("--seed", type=int, default=None, help=SEED_HELP)
-    r.add_argument("--vclass", default="paper-a", help="vehicle class for single/swap/crossing")
+    r.add_argument("--vclass", default=None,
+                   help="vehicle class for single/swap/crossing (default paper-a; car with --controller authority)")
+    r.add_argument("--controller", choices=["paper", "authority"], default="paper",
+                   help="paper (default): the paper's sets, cost and centred claims; authority: movement-authority "
+                        "sets and cost with reach-tightened claims (design.md §7; car, bus, truck; single: a 600 m "
+                        "straight; junction zones off)")
     r.add_argument("--tm", choices=["greedy", "optimal"], default=None, help="default: the scenario's")
     r.add_argument("--check", choices=["union", "timed"], default=None)
     r.add_argument("--switching", choices=["terminal", "early"], default=None)

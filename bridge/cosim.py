@@ -34,8 +34,11 @@ from controllers.classes import VehicleClass
 from controllers.plant import DISTURBANCES, step as plant_step
 from controllers.settings import ControllerSettings, SynthesisSettings
 from controllers.stmpc import STMPC
+from bridge.groups import _Group, _headings
 from controllers.synthesis import synthesize
 from tm.claims import Claims
+from tm.reach import ReachClaims
+from tm.reach_book import ReachBook, admit_reach, footprint_claims
 from tm.junctions import ClassReach, JunctionFleet, JunctionGate, Zone
 from tm.manager import FleetState, TrafficManager
 from tm.pedestrians import STRIPING_SPEED_FACTOR, PedestrianRule, footprint_contacts
@@ -43,7 +46,10 @@ from tm.monitor import Monitor
 from tm.settings import TMSettings
 from tm.signals import SignalBook, SignalSettings, StopLines, withhold as signal_withhold
 
-__all__ = ["Zone", "VehicleSpec", "CosimSettings", "World", "FreePlaneWorld", "Cosim", "VehicleRecord"]
+#: Valid values of :attr:`CosimSettings.controller`.
+CONTROLLERS = ("paper", "authority")
+
+__all__ = ["CONTROLLERS", "Zone", "VehicleSpec", "CosimSettings", "World", "FreePlaneWorld", "Cosim", "VehicleRecord"]
 
 
 @dataclass(frozen=True)
@@ -77,8 +83,13 @@ class CosimSettings:
     duration_s: float | None = None
     Ts: float = 0.1
     signals: SignalSettings = field(default_factory=SignalSettings)
+    #: ``paper``: the paper's sets, eq. (6) and centred claims; ``authority``: movement-authority
+    #: sets and cost with reach-tightened claims (design.md §7; classes with ``comfort_decel``)
+    controller: str = "paper"
 
     def __post_init__(self) -> None:
+        if self.controller not in CONTROLLERS:
+            raise ValueError(f"CosimSettings.controller: must be one of {CONTROLLERS}, got {self.controller!r}")
         if not isinstance(self.signals, SignalSettings):
             raise ValueError(f"CosimSettings.signals: must be a SignalSettings, got {self.signals!r}")
         ControllerSettings(solver=self.solver, switching=self.switching)  # validates both
@@ -130,91 +141,6 @@ class VehicleRecord:
     closest_m: float = np.inf
     speed_sum: float = 0.0
     steps: int = 0
-
-
-class _Group:
-    """The active vehicles of one class, as arrays."""
-
-    def __init__(self, vclass: VehicleClass, ctl: STMPC):
-        self.vclass = vclass
-        self.ctl = ctl
-        n = vclass.model.n
-        self.ids: list[str] = []
-        self.X = np.zeros((0, n))
-        self.k = np.zeros(0, dtype=np.intp)
-        self.l = np.zeros(0, dtype=np.intp)
-        self.W: list[np.ndarray] = []
-        self.H: list[np.ndarray] = []
-        # every route's waypoints and headings in one buffer, so that the current (or next)
-        # waypoints of all vehicles are one gather: row start[i] + k[i] of vehicle i
-        self._wbuf = np.zeros((1024, 3))
-        self._used = 0
-        self.start = np.zeros(0, dtype=np.intp)
-        self.K = np.zeros(0, dtype=np.intp)
-        # per-vehicle accumulators (flushed into the VehicleRecords by Cosim)
-        self.speed_sum = np.zeros(0)
-        self.steps = np.zeros(0, dtype=np.intp)
-        self.denied_last = np.zeros(0, dtype=bool)
-        self.req_l = np.zeros(0, dtype=np.intp)  # request indices of the last TM state
-
-    def add(self, vid, W, H, x0, l0):
-        K = len(W)
-        live = int(self.K.sum())
-        if self._used + K > len(self._wbuf):
-            if self._used > 2 * live + 4096:  # mostly removed routes: compact
-                rows = np.concatenate([np.arange(s, s + k) for s, k in zip(self.start, self.K)]) \
-                    if len(self.K) else np.zeros(0, dtype=np.intp)
-                self._wbuf = np.vstack([self._wbuf[rows], np.zeros((max(1024, 2 * (live + K)), 3))])
-                self.start = np.concatenate([[0], np.cumsum(self.K)[:-1]]).astype(np.intp) \
-                    if len(self.K) else self.start
-                self._used = live
-            if self._used + K > len(self._wbuf):
-                grow = max(len(self._wbuf), K)
-                self._wbuf = np.vstack([self._wbuf, np.zeros((grow, 3))])
-        self._wbuf[self._used:self._used + K, :2] = W
-        self._wbuf[self._used:self._used + K, 2] = H
-        self.ids.append(vid)
-        self.X = np.vstack([self.X, x0[None]])
-        self.k = np.append(self.k, 0)
-        self.l = np.append(self.l, l0)
-        self.W.append(W)
-        self.H.append(H)
-        self.start = np.append(self.start, self._used)
-        self.K = np.append(self.K, K)
-        self._used += K
-        self.speed_sum = np.append(self.speed_sum, 0.0)
-        self.steps = np.append(self.steps, 0)
-        self.denied_last = np.append(self.denied_last, False)
-        self.req_l = np.append(self.req_l, 0)
-
-    def remove(self, mask):
-        keep = ~mask
-        self.ids = [v for v, k in zip(self.ids, keep) if k]
-        self.X, self.k, self.l = self.X[keep], self.k[keep], self.l[keep]
-        self.W = [w for w, k in zip(self.W, keep) if k]
-        self.H = [h for h, k in zip(self.H, keep) if k]
-        self.start, self.K = self.start[keep], self.K[keep]
-        self.speed_sum, self.steps = self.speed_sum[keep], self.steps[keep]
-        self.denied_last, self.req_l = self.denied_last[keep], self.req_l[keep]
-
-    @property
-    def at_last(self) -> np.ndarray:
-        """Whether each vehicle's current waypoint is its route's last."""
-        return self.k == self.K - 1
-
-    def centres(self, offset=0):
-        """Waypoints ``k + offset`` (clipped to the last), their headings, and whether they exist."""
-        if not self.ids:
-            return np.zeros((0, 2)), np.zeros(0), np.zeros(0, dtype=bool)
-        row = self._wbuf[self.start + np.minimum(self.k + offset, self.K - 1)]
-        return row[:, :2], row[:, 2], self.k + offset < self.K
-
-
-def _headings(W: np.ndarray) -> np.ndarray:
-    """Heading of the segment arriving at each waypoint (the first takes the first segment's)."""
-    d = np.diff(W, axis=0)
-    h = np.arctan2(d[:, 1], d[:, 0]) if len(d) else np.zeros(0)
-    return np.concatenate([h[:1] if len(h) else [0.0], h])
 
 
 class Cosim:
@@ -271,8 +197,20 @@ class Cosim:
                         f"{s.vclass!r} (road frame) accepts at most {model.turn_max_deg} deg between segments")
         if len({s.id for s in specs}) != len(specs):
             raise ValueError("vehicle ids must be unique")
-        cs = ControllerSettings(solver=settings.solver, switching=settings.switching)
-        self.families = {c: synthesize(vc.model, synthesis) for c, vc in self.classes.items()}
+        self.authority = settings.controller == "authority"
+        cs = ControllerSettings(solver=settings.solver, switching=settings.switching,
+                                mode="authority" if self.authority else "paper")
+        if self.authority:
+            bad = sorted(c for c, vc in self.classes.items() if vc.comfort_decel is None)
+            if bad:
+                raise ValueError(f"controller 'authority': vehicle class(es) {bad} have no comfort_decel; "
+                                 "use classes with one (car, bus, truck) or controller 'paper'")
+        syn = synthesis or SynthesisSettings()
+        self.families = {c: synthesize(vc.model, replace(syn, authority_decel=vc.comfort_decel)
+                                       if self.authority else synthesis) for c, vc in self.classes.items()}
+        #: claim models (authority mode): reach-tightened, time-indexed claims (tm.reach_book)
+        self.reach = ReachBook(self.families, {c: (vc.length, vc.width) for c, vc in self.classes.items()}) \
+            if self.authority else None
         self.groups = {c: _Group(vc, STMPC(self.families[c], cs)) for c, vc in self.classes.items()}
         self.tm = TrafficManager(settings.tm, {c: f.position_sets for c, f in self.families.items()},
                                  rotating=[c for c, vc in self.classes.items() if vc.model.frame == "road"])
@@ -288,7 +226,9 @@ class Cosim:
         self.collisions_world: set = set()
         self.last_decision = None
         # zones: guards, tokens, corridors and queues (the liveness layer, tm.junctions)
-        self.zones = list(zones or [])
+        # the junction layer's extents assume centred sets: off in authority mode (its TM keeps safety)
+        self.zones = [] if self.authority else list(zones or [])
+        self.zones_ignored = len(zones or []) if self.authority else 0
         self.junctions = JunctionGate(self.zones, {
             c: ClassReach.of(f.position_sets, self.classes[c].length, self.classes[c].width,
                              self.classes[c].model.frame == "road") for c, f in self.families.items()})
@@ -318,7 +258,7 @@ class Cosim:
                 lp = g.ctl.index(g.X, nxt, nh)
                 self._ms_request += (time.perf_counter() - tr) * 1e3
                 g.req_l = lp
-                may = has & (lp <= g.ctl.N)
+                may = has & g.ctl.may_request(g.X, cen, hd, lp)
                 if self.settings.switching == "terminal":
                     may &= g.l == 0
                 RQ.append(may)
@@ -452,6 +392,38 @@ class Cosim:
             return state
         return replace(state, requesting=req)
 
+    def _reach_claims(self, requests: FleetState | None = None) -> ReachClaims:
+        """Reach claims (authority mode) of every vehicle for its current waypoint, in fleet order;
+        with ``requests``: of its requesters for their requested waypoints."""
+        parts, o = [], 0
+        for c, g in self.groups.items():
+            if not g.ids:
+                continue
+            if requests is None:
+                cen, hd, _ = g.centres()
+                parts.append((c, g.X, cen, hd, g.l))
+            else:
+                r = np.asarray(requests.requesting[o:o + len(g.ids)], dtype=bool)
+                cen, hd, _ = g.centres(1)
+                parts.append((c, g.X[r], cen[r], hd[r], g.req_l[r]))
+            o += len(g.ids)
+        return self.reach.claims(parts)
+
+    def _entry_claims(self, ready: list[VehicleSpec], cand: FleetState) -> ReachClaims:
+        """Reach claims of the ready vehicles at rest on their first waypoints (in ``ready``'s order)."""
+        parts, rows = [], []
+        for c in self.groups:
+            idx = np.flatnonzero(cand.family == c)
+            if len(idx):
+                X = self.classes[c].model.equilibrium(cand.centre[idx])
+                ctl = self.groups[c].ctl
+                parts.append((c, X, cand.centre[idx], cand.heading[idx],
+                              ctl.index(X, cand.centre[idx], cand.heading[idx])))
+                rows.append(idx)
+        inv = np.empty(len(ready), dtype=np.intp)
+        inv[np.concatenate(rows)] = np.arange(len(ready))
+        return self.reach.claims(parts).take(inv)
+
     # -------------------------------------------------------------- one step
     def step(self) -> dict:
         s = self.settings
@@ -466,7 +438,8 @@ class Cosim:
         if state is not None:
             # 2. TM: Go/Stop for every request
             td = time.perf_counter()
-            dec = self.tm.decide(state)
+            dec = self.tm.decide_reach(state, self._reach_claims(), self._reach_claims(state)) \
+                if self.authority else self.tm.decide(state)
             ms_decide = (time.perf_counter() - td) * 1e3
             self.last_decision = dec
             ms_tm = (time.perf_counter() - tt) * 1e3
@@ -511,6 +484,9 @@ class Cosim:
             g.speed_sum += np.linalg.norm(g.X[:, 2:4], axis=1)
             g.steps += 1
         ms_ctl = (time.perf_counter() - tc) * 1e3
+        if self.authority and state is not None:  # 4a. x(t+1) inside S_1(t) (tube escapes counted)
+            self.monitor.escapes(dec.claims, np.vstack([g.X[:, :2] for g in self.groups.values() if g.ids]),
+                                 state.length, state.width)
         self._count_red_crossings()  # 4b. stop lines crossed on red (front bumpers)
         self.t += 1
         t_next = self.t * s.Ts
@@ -534,7 +510,7 @@ class Cosim:
         if cur is not None:
             pos = np.vstack([g.X[:, :2] for g in self.groups.values() if g.ids])
             ms = self.monitor.step(cur.ids, pos, cur.heading, cur.length, cur.width,
-                                   claims=self.tm.claims(cur))
+                                   claims=self._reach_claims() if self.authority else self.tm.claims(cur))
             self.world.push(list(cur.ids), pos, cur.heading)
             if np.isfinite(ms.min_separation) and ms.closest_pair:
                 for v in ms.closest_pair:
@@ -591,7 +567,14 @@ class Cosim:
             cur = FleetState(ids=cur.ids, family=cur.family, centre=cur.centre,
                              index=np.minimum(cur.index + 1, top), heading=cur.heading, length=cur.length,
                              width=cur.width)
-        ok = self.tm.admit(cur, cand)
+        if self.authority:  # the others' reach claims and their footprints now (condition (12))
+            now = self._reach_claims() if len(cur.ids) else None
+            pos = np.vstack([g.X[:, :2] for g in self.groups.values() if g.ids]) if now is not None else None
+            now = ReachClaims.concat(now, footprint_claims(pos, cur.heading, cur.length, cur.width)) \
+                if now is not None else footprint_claims(np.zeros((0, 2)), [], [], [])
+            ok = admit_reach(now, self._entry_claims(ready, cand), self.settings.tm.check)
+        else:
+            ok = self.tm.admit(cur, cand)
         # nor into a junction token holder's corridor (tm.junctions)
         ok = self.junctions.admissible(ok, cand.family, cand.centre, cand.heading)
         if self.pedestrians is not None and ok.any():  # nor onto a walking region a pedestrian can reach

@@ -124,12 +124,17 @@ def vtype_class(p: VTypeParams) -> VehicleClass:
     ``min(accel, decel, CITY_U_MAX)`` (the model's input box is symmetric, so the smaller
     of the two abilities bounds both); across the road as ``car``.  Its sets are
     synthesised on first use and cached on disk by the model (:mod:`controllers.synthesis`).
+    ``comfort_decel`` (movement-authority mode): ``min(0.8 u, CAR_COMFORT_DECEL)``.
     """
     v = round(min(p.max_speed, CITY_V_MAX), 4)
     u = round(min(p.accel, p.decel, CITY_U_MAX), 4)
     model = double_integrator(v_max=(v, 0.2), u_max=(u, 0.5), d_max=0.005, name=p.name, frame="road",
                               turn_max_deg=CITY_TURN_MAX_DEG, delta=3.0)
-    return VehicleClass(p.name, model, length=float(p.length), width=float(p.width), vclass=p.vclass)
+    # movement-authority mode: a comfortable deceleration of 0.8 of the input bound (as the built-in
+    # truck and bus: 1.2 of 1.5 m/s^2), at most the car's
+    comfort = min(CAR_COMFORT_DECEL, round(0.8 * u, 4))
+    return VehicleClass(p.name, model, length=float(p.length), width=float(p.width), vclass=p.vclass,
+                        comfort_decel=comfort)
 
 
 def builtin_classes() -> dict[str, VehicleClass]:

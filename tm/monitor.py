@@ -8,6 +8,8 @@ headings and footprints, and the claims in force.  It counts
   (broad phase + separating axes);
 * claim-invariant violations: pairs of claims that conflict (the TM's
   invariant says there are none);
+* tube escapes (reach claims, :meth:`Monitor.escapes`): vehicles whose position ``x(t+1)``
+  lies outside the position part of their claim ``S_1(t)``;
 * the minimum separation (m) between any two footprints (``inf`` with
   fewer than two vehicles; 0 when two overlap).
 
@@ -24,6 +26,8 @@ import numpy as np
 from controllers.tolerances import GEOMETRY_TOL
 from tm.claims import CHECK_KINDS, Claims, conflicting_pairs
 from tm.geometry import aabb, broad_phase, intersect_sat, min_pair_distance, rectangles
+from tm.reach import ReachClaims, pairwise_conflicts
+from tm.reach_book import tube_escapes
 
 __all__ = ["MonitorStep", "Monitor", "footprint_polygons", "footprint_overlaps"]
 
@@ -92,10 +96,18 @@ class Monitor:
         self.steps = 0
         self.footprint_overlaps = 0
         self.claim_violations = 0
+        self.tube_escapes = 0
         self.min_separation = np.inf
 
+    def escapes(self, claims: ReachClaims, position, length, width) -> int:
+        """Count (and return) the vehicles outside the position part of their ``S_1`` (slot 1 of
+        ``claims``: the claims in force after the last decision, rows as ``position``)."""
+        n = int(tube_escapes(claims, position, length, width).sum())
+        self.tube_escapes += n
+        return n
+
     def step(self, ids: Sequence[str], position, heading, length, width,
-             claims: Claims | None = None) -> MonitorStep:
+             claims: Claims | ReachClaims | None = None) -> MonitorStep:
         """Check one step and add it to the totals.
 
         Parameters
@@ -104,9 +116,10 @@ class Monitor:
         position : array_like, shape (V, 2)
             Footprint centres (m).
         heading, length, width : array_like, shape (V,)
-        claims : Claims, optional
-            Claims in force, in any order (e.g. ``decision.claims``); not
-            checked when omitted.
+        claims : Claims or ReachClaims, optional
+            Claims in force, rows as ``ids`` (e.g. ``decision.claims``); not
+            checked when omitted.  Reach claims are compared with ``check``
+            (``timed``: slot k against slot k).
         """
         ids = tuple(ids)
         polys = footprint_polygons(position, heading, length, width)
@@ -118,7 +131,8 @@ class Monitor:
         if claims is not None:
             if len(claims) != len(ids):
                 raise ValueError(f"Monitor.step: {len(ids)} ids but {len(claims)} claims")
-            ci, cj = conflicting_pairs(claims, self.check)
+            ci, cj = pairwise_conflicts(claims, self.check) if isinstance(claims, ReachClaims) \
+                else conflicting_pairs(claims, self.check)
             violation = tuple((ids[a], ids[b]) for a, b in zip(ci.tolist(), cj.tolist()))
         d, a, b = min_pair_distance(polys)
         result = MonitorStep(footprint_overlaps=len(overlap), claim_violations=len(violation),

@@ -231,3 +231,13 @@ def test_a_faster_pedestrian_vtype_raises_the_speed_bound(ped_cfg, tmp_path):
     s = sw.run_sumo(str(cfg), tmp_path / "out", _opts(duration=5.0))
     assert s["complete"], s.get("error")
     assert s["pedestrian_speed_bound_mps"] == pytest.approx(5.0 * STRIPING_SPEED_FACTOR, rel=1e-3)
+
+
+def test_authority_mode_with_pedestrian_regions_is_refused_by_name(ped_cfg, tmp_path):
+    """--controller authority has no pedestrian guard yet: a net with crossings is refused with a
+    message naming the file and the two ways out, not driven unguarded."""
+    import bridge.sumo_world as sw
+
+    s = sw.run_sumo(str(ped_cfg), tmp_path, _opts(controller="authority", duration=5.0))
+    assert s["complete"] is False
+    assert str(ped_cfg) in s["error"] and "--controller paper" in s["error"] and "--pedestrians ignore" in s["error"]

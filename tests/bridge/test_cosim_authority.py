@@ -1,0 +1,148 @@
+"""Movement-authority mode through the co-simulation loop (``CosimSettings.controller = "authority"``):
+cruise speed, safety as a property over random free-plane scenarios, the tube-escape counter."""
+
+import json
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings, strategies as st
+
+import bridge.cosim as cosim_mod
+from bridge.cosim import Cosim, CosimSettings, VehicleSpec
+from bridge.layouts import crossing, subsample
+from bridge.scenarios import kpi_tables, run_multi
+from controllers.classes import builtin_classes
+from tm.settings import TMSettings
+
+CLASSES = builtin_classes()
+URBAN = ["car", "bus", "truck"]
+
+
+def _speeds(sim: Cosim, vclass: str, max_steps: int = 4000) -> np.ndarray:
+    sim._admit(0.0)
+    v = []
+    while not sim.done and sim.t < max_steps:
+        sim.step()
+        g = sim.groups[vclass]
+        if g.ids:
+            v.append(float(np.linalg.norm(g.X[0, 2:4])))
+    assert sim.done, "the vehicle did not arrive"
+    return np.array(v)
+
+
+def test_single_car_cruises_at_the_lane_limit():
+    """A car alone on a 600 m straight (random disturbances): its median speed is at least 13.5 m/s
+    (the issue's target; v̄ = 13.89 m/s), where the paper's sets cap it near 5 m/s."""
+    sp = VehicleSpec("a", "car", subsample([[0.0, 0.0], [600.0, 0.0]], 3.0))
+    v = _speeds(Cosim(CLASSES, [sp], CosimSettings(controller="authority")), "car")
+    assert np.median(v) >= 13.5
+    assert v.max() <= 13.89 + 1e-6  # the along-road speed bound v̄ (tolerance: float rounding only)
+    paper = _speeds(Cosim(CLASSES, [sp], CosimSettings()), "car", max_steps=20000)
+    assert paper.max() < 6.0  # paper mode unchanged: capped by T^N (5.38 m/s measured)
+
+
+def _merge(n: int, rng, vclass: str) -> list[VehicleSpec]:
+    """Two roads meeting at 40 deg into one (a merge: claims conflict where the roads join)."""
+    specs = []
+    for i in range(n):
+        side = 1.0 if i % 2 else -1.0
+        start = np.array([-120.0 * np.cos(np.radians(20)), side * 120.0 * np.sin(np.radians(20))])
+        pts = np.array([start, [0.0, 0.0], [150.0, 0.0]])
+        specs.append(VehicleSpec(f"m{i}", vclass, subsample(pts, CLASSES[vclass].model.delta),
+                                 depart_s=float(rng.uniform(0, 8))))
+    return specs
+
+
+def _queue(n: int, rng, vclass: str) -> list[VehicleSpec]:
+    """Vehicles entering one straight road one after another (followers, admission)."""
+    W = subsample([[0.0, 0.0], [400.0, 0.0]], CLASSES[vclass].model.delta)
+    return [VehicleSpec(f"q{i}", vclass, W, depart_s=float(t)) for i, t in enumerate(np.sort(rng.uniform(0, 6, n)))]
+
+
+@st.composite
+def authority_scenarios(draw):
+    seed = draw(st.integers(0, 2**31 - 1))
+    rng = np.random.default_rng(seed)
+    kind = draw(st.sampled_from(["crossing", "merge", "queue"]))
+    vclass = draw(st.sampled_from(URBAN))
+    if kind == "crossing":
+        specs, _ = crossing(draw(st.integers(1, 2)), vclass, 3.0, headway_s=float(rng.uniform(1.0, 4.0)))
+    elif kind == "merge":
+        specs = _merge(draw(st.integers(2, 5)), rng, vclass)
+    else:
+        specs = _queue(draw(st.integers(2, 5)), rng, vclass)
+    opts = CosimSettings(tm=TMSettings(policy=draw(st.sampled_from(["greedy", "optimal"])),
+                                       check=draw(st.sampled_from(["union", "timed"])), seed=seed % 1000),
+                         disturbance=draw(st.sampled_from(["random", "adversarial", "none"])), seed=seed % 1000,
+                         controller="authority")
+    return kind, specs, opts
+
+
+@settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(authority_scenarios())
+def test_authority_mode_is_safe(scenario):
+    """Random crossings, merges and queues of cars, buses or trucks, random TM policies, checks and
+    disturbance policies (adversarial included): no footprint overlap, reach claims pairwise
+    disjoint after every step, the index invariant holds, x(t+1) always inside S_1(t)."""
+    kind, specs, opts = scenario
+    sim = Cosim(CLASSES, specs, opts)
+    sim.run(max_steps=900)
+    figures, _, _ = kpi_tables(sim)
+    assert figures["collisions_geometric"] == 0
+    assert figures["footprint_overlaps"] == 0
+    assert figures["claim_violations"] == 0
+    assert figures["invariant_violations"] == 0
+    assert figures["constraint_violations"] == 0
+    assert figures["tube_escapes"] == 0
+    assert sim.monitor.steps > 0
+
+
+def test_crossing_authority_all_arrive_and_safe():
+    """The ``crossing`` scenario (8 cars, its zone ignored in authority mode) through run_multi:
+    every car arrives, every safety counter 0, and the summary says the zone was ignored."""
+    import tempfile
+    from pathlib import Path
+
+    with tempfile.TemporaryDirectory() as d:
+        opts = SimpleNamespace(vclass="car", tm="optimal", check="union", switching="early", disturbance="random",
+                               solver="exact", duration=None, vehicles=8, seed=0, controller="authority")
+        summary = run_multi("crossing", Path(d), opts)
+        written = json.loads((Path(d) / "summary.json").read_text())
+    assert summary["complete"] and written["safe"] is True
+    assert written["tube_escapes"] == 0 and written["claim_violations"] == 0
+    assert written["vehicles_arrived"] == 8
+    assert written["zones_ignored"] == 1
+
+
+def test_tube_escape_counter_fires(monkeypatch):
+    """A plant pushed 2 m sideways (far outside the disturbance box D): the vehicle leaves its S_1,
+    the tube-escape counter fires and the safety verdict names it."""
+    real = cosim_mod.plant_step
+
+    def pushed(model, X, U, cen, disturbance, rng, heading=None):
+        Xn, d = real(model, X, U, cen, disturbance, rng, heading=heading)
+        Xn = Xn.copy()
+        Xn[:, 1] += 2.0
+        return Xn, d
+
+    sp = VehicleSpec("a", "car", subsample([[0.0, 0.0], [60.0, 0.0]], 3.0))
+    sim = Cosim(CLASSES, [sp], CosimSettings(controller="authority"))
+    sim._admit(0.0)
+    sim.step()
+    assert sim.monitor.tube_escapes == 0  # unpushed: inside
+    monkeypatch.setattr(cosim_mod, "plant_step", pushed)
+    sim.step()
+    assert sim.monitor.tube_escapes == 1
+    figures, _, _ = kpi_tables(sim)
+    assert figures["tube_escapes"] == 1
+    assert figures["safe"] is False and "tube_escapes" in figures["safety_violations"]
+
+
+def test_controller_setting_validated():
+    """A bad controller name, or a class without comfort_decel in authority mode: clear errors."""
+    with pytest.raises(ValueError, match="CosimSettings.controller"):
+        CosimSettings(controller="fast")
+    sp = VehicleSpec("a", "paper-a", subsample([[0.0, 0.0], [30.0, 0.0]], CLASSES["paper-a"].model.delta))
+    with pytest.raises(ValueError, match="paper-a.*comfort_decel"):
+        Cosim(CLASSES, [sp], CosimSettings(controller="authority"))

@@ -1,0 +1,103 @@
+"""Reach-tightened claims of a whole fleet, per class (design.md §7): what the co-simulation loop
+hands :meth:`tm.manager.TrafficManager.decide_reach`, the admission check and the monitor.
+
+One :class:`~tm.reach.ReachModel` per movement-authority class; :meth:`ReachBook.claims` builds the
+claims of several class groups (states, waypoints, headings, indices) in one call and
+concatenates them in the order given (the order of the loop's :class:`~tm.manager.FleetState`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+
+from controllers.authority import build_tables
+from controllers.synthesis import SetFamily, rotate_pairs
+from controllers.tolerances import GEOMETRY_TOL
+from tm.reach import ReachClaims, ReachModel, candidate_pairs, claims_conflict, reach_claims, world_aabb
+
+__all__ = ["ReachBook", "tube_escapes", "footprint_claims", "admit_reach"]
+
+
+class ReachBook:
+    """Claim models of the classes of a run.
+
+    Parameters
+    ----------
+    families : mapping of str to SetFamily
+        Movement-authority families (synthesised with ``authority_decel``).
+    footprints : mapping of str to (length, width)
+    """
+
+    def __init__(self, families: Mapping[str, SetFamily], footprints: Mapping[str, tuple[float, float]]):
+        missing = [c for c, f in families.items() if f.authority is None]
+        if missing:
+            raise ValueError(f"ReachBook: class(es) {missing} have no movement-authority family "
+                             "(synthesise with SynthesisSettings.authority_decel)")
+        self.models = {c: ReachModel.build(f, build_tables(f), *footprints[c]) for c, f in families.items()}
+
+    @property
+    def K(self) -> int:
+        """The largest number of claim slots over the classes."""
+        return max(m.K for m in self.models.values())
+
+    def claims(self, parts: Sequence[tuple[str, np.ndarray, np.ndarray, np.ndarray, np.ndarray]]) -> ReachClaims:
+        """Claims of groups ``(class, X (n, 4), centre (n, 2), heading (n,), index (n,))``, concatenated
+        (shorter horizons padded with their last slot); an empty claim set when every group is empty."""
+        out = [reach_claims(self.models[c], X, C, H, np.minimum(L, self.models[c].N))
+               for c, X, C, H, L in parts if len(X)]
+        if not out:
+            K = self.K
+            return ReachClaims(np.zeros((0, 2)), np.zeros(0), np.zeros((0, K, 2)), np.zeros((0, K, 2)))
+        return ReachClaims.concat(*out)
+
+
+def footprint_claims(position, heading, length, width, K: int = 1) -> ReachClaims:
+    """The footprints now as claims (every slot the footprint): what a new vehicle must miss when it
+    appears, besides the others' claims from the next step on."""
+    position = np.asarray(position, dtype=float).reshape(-1, 2)
+    half = 0.5 * np.column_stack([np.asarray(length, dtype=float), np.asarray(width, dtype=float)])
+    lo = np.repeat(-half[:, None, :], K, axis=1)
+    return ReachClaims(position, np.asarray(heading, dtype=float), lo, -lo)
+
+
+def tube_escapes(claims: ReachClaims, position, length, width, tol: float = GEOMETRY_TOL) -> np.ndarray:
+    """Which vehicles' positions ``x(t+1)`` lie outside the position part of their claim ``S_1(t)``
+    (the box minus the footprint, ``tol`` given away): a tube escape, never expected.
+
+    ``claims``: the claims in force after the decision of step ``t`` (the box of slot 1 was built
+    with ``body_offset = 0``: half footprint ``(length, width) / 2`` in the segment frame)."""
+    position = np.asarray(position, dtype=float).reshape(-1, 2)
+    if len(position) != len(claims):
+        raise ValueError(f"tube_escapes: {len(claims)} claims for {len(position)} positions")
+    e = rotate_pairs(position - claims.centre, -claims.heading)
+    half = 0.5 * np.column_stack([np.asarray(length, dtype=float), np.asarray(width, dtype=float)])
+    lo, hi = claims.lo[:, 0] + half, claims.hi[:, 0] - half
+    return np.any((e < lo - tol) | (e > hi + tol), axis=1)
+
+
+def admit_reach(current: ReachClaims, candidates: ReachClaims, check: str) -> np.ndarray:
+    """Initial condition (12) with reach claims: candidates taken in order, each admitted iff its
+    claims miss every claim of ``current`` (include the footprints now: :func:`footprint_claims`)
+    and those of the candidates admitted before it."""
+    C = len(candidates)
+    admitted = np.zeros(C, dtype=bool)
+    if not C:
+        return admitted
+    allc = ReachClaims.concat(current, candidates) if len(current) else candidates
+    n = len(current)
+    lo, hi = world_aabb(allc)
+    i, j = candidate_pairs(lo[n:], hi[n:], lo, hi)
+    keep = j != i + n
+    i, j = i[keep], j[keep]
+    hit = np.zeros(0, dtype=bool) if not len(i) else claims_conflict(allc, i + n, allc, j, check)
+    i, j = i[hit], j[hit]
+    blocked = np.zeros(C, dtype=bool)
+    blocked[i[j < n]] = True
+    for k in range(C):
+        if blocked[k]:
+            continue
+        earlier = j[(i == k) & (j >= n) & (j < n + k)] - n
+        admitted[k] = not admitted[earlier].any()
+    return admitted
