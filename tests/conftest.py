@@ -36,6 +36,10 @@ SLOW_FIRST = (
     "tests/bridge/test_canary.py",
     "tests/bridge/test_report_vs_sumo.py",
     "tests/benchmarks/",
+    "tests/controllers/test_synthesis.py::test_one_step_property_and_nesting",
+    "tests/analysis/test_plots.py::test_a_plot_per_kind",
+    "tests/tm/test_manager.py::test_multi_step_random_walk_keeps_the_invariant",
+    "tests/tm/test_reach.py::test_random_fleets_on_a_lane_never_touch",
     "tests/bridge/test_cosim.py",
     "tests/bridge/test_sumo_cosim.py",
 )
