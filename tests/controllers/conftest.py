@@ -12,8 +12,9 @@ JERK = dict(v_max=13.89, a_max=4.0, j_max=40.0, d_max=0.01, delta=1.0)
 
 
 @pytest.fixture(scope="session")
-def settings(tmp_path_factory):
-    return SynthesisSettings(cache_dir=tmp_path_factory.mktemp("sets-cache"))
+def settings(shared_set_cache):
+    """Default synthesis settings on the suite's shared set cache (tests/conftest.py)."""
+    return SynthesisSettings(cache_dir=shared_set_cache)
 
 
 @pytest.fixture(scope="session")

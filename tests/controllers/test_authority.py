@@ -19,8 +19,8 @@ URBAN = ("car", "bus", "truck")
 
 
 @pytest.fixture(scope="module")
-def cache(tmp_path_factory):
-    return tmp_path_factory.mktemp("ma-cache")
+def cache(shared_set_cache):
+    return shared_set_cache
 
 
 @pytest.fixture(scope="module")
@@ -44,13 +44,13 @@ def _ma_state(vc, fam, level):
 
 
 @pytest.mark.parametrize("c", URBAN)
-def test_n_l_is_the_first_level_holding_full_speed_a_braking_distance_before(ma, c):
+def test_n_l_is_the_first_level_holding_full_speed_a_braking_distance_before(ma, c, cache):
     vc, fam, _ = ma[c]
     a = fam.authority
     assert a.s_ma == pytest.approx(vc.v_max ** 2 / (2 * vc.comfort_decel) + 2 * vc.model.delta, abs=1e-12)
     assert _ma_state(vc, fam, fam.N) and not _ma_state(vc, fam, fam.N - 1)
     # the paper's N (first level meeting condition (8)) is kept as n_min and is below N_L
-    paper = synthesize(vc.model, SynthesisSettings(cache=False))
+    paper = synthesize(vc.model, SynthesisSettings(cache_dir=cache))
     assert a.n_min == paper.N < fam.N
     # every factor has the same number of levels, nested (T^{l-1} ⊆ T^l)
     for f in fam.factors:
@@ -59,11 +59,11 @@ def test_n_l_is_the_first_level_holding_full_speed_a_braking_distance_before(ma,
             assert f.levels[l - 1] <= f.levels[l]
 
 
-def test_paper_n_table_and_cache_key_unchanged(tmp_path):
+def test_paper_n_table_and_cache_key_unchanged(shared_set_cache):
     """The paper mode (authority_decel None) keeps the N table of benchmarks/results/controllers.csv
     (measured before this mode existed) and the cache key format, so old caches stay valid."""
     table = {"paper-a": 22, "paper-b": 28, "paper-c": 20, "paper-d": 22, "car": 22, "bus": 31, "truck": 31}
-    s = SynthesisSettings(cache_dir=tmp_path)
+    s = SynthesisSettings(cache_dir=shared_set_cache)
     for name, vc in builtin_classes().items():
         assert synthesize(vc.model, s).N == table[name], name
     assert s.key() == "q1-r1-e0.05-L200-Tauto-auto-x0"

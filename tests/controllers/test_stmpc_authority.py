@@ -19,8 +19,8 @@ URBAN = ("car", "bus", "truck")
 
 
 @pytest.fixture(scope="module")
-def fams(tmp_path_factory):
-    cache = tmp_path_factory.mktemp("ma-cache")
+def fams(shared_set_cache):
+    cache = shared_set_cache
     return {c: synthesize(get_class(c).model, SynthesisSettings(authority_decel=get_class(c).comfort_decel,
                                                                 cache_dir=cache)) for c in URBAN}
 
@@ -125,8 +125,8 @@ def test_solvers_agree_on_the_authority_cost(fams, c):
     assert np.abs(paper - out["exact"]).max() > 0.1  # the cost did change
 
 
-def test_authority_mode_needs_an_authority_family(tmp_path):
-    paper = synthesize(get_class("car").model, SynthesisSettings(cache_dir=tmp_path))
+def test_authority_mode_needs_an_authority_family(shared_set_cache):
+    paper = synthesize(get_class("car").model, SynthesisSettings(cache_dir=shared_set_cache))
     with pytest.raises(ValueError, match="authority_decel"):
         STMPC(paper, ControllerSettings(mode="authority"))
     with pytest.raises(SettingsError, match="ControllerSettings.mode"):

@@ -22,8 +22,8 @@ URBAN = ("car", "bus", "truck")
 
 
 @pytest.fixture(scope="module")
-def lcs(tmp_path_factory):
-    s = SynthesisSettings(cache_dir=tmp_path_factory.mktemp("ma-cache"))
+def lcs(shared_set_cache):
+    s = SynthesisSettings(cache_dir=shared_set_cache)
     return {c: lane_class(get_class(c), s) for c in URBAN}
 
 
