@@ -255,6 +255,26 @@ def _claims_of(table: FamilyTable, state: FleetState, requests: bool) -> tuple[n
     return req, cur, new
 
 
+def _sorted_conflicts(state: FleetState, req: np.ndarray, cur, new, owner: np.ndarray, a: np.ndarray,
+                      b: np.ndarray, seconds: tuple) -> _Conflicts:
+    """The conflict table from hit pairs ``(a, b)`` of concatenated claims (current ones first, then
+    the requesters' new ones, ``a`` always a new claim); ``owner`` maps a claim to its vehicle."""
+    V, R = len(state), len(req)
+    i = a - V                                     # requester-local index of the new claim
+    b_new = b >= V
+    b_req = state.requesting[owner[b]]
+    local = np.full(V, -1, dtype=np.intp)
+    local[req] = np.arange(R)
+    kinds = np.where(b_new, "new-new", np.where(b_req, "new-old", "new-fixed"))
+    return _Conflicts(
+        req=req, cur=cur, new=new,
+        fixed_hits=np.bincount(i[~b_req], minlength=R),
+        leq=np.stack([i[b_req & ~b_new], local[owner[b[b_req & ~b_new]]]], axis=1),
+        excl=np.stack([i[b_new], b[b_new] - V], axis=1),
+        edges=np.stack([owner[a], owner[b]], axis=1), edge_kinds=kinds,
+        seconds=seconds)
+
+
 def _requester_conflicts(table: FamilyTable, state: FleetState, check: str) -> _Conflicts:
     t0 = time.perf_counter()
     req, cur, new = _claims_of(table, state, requests=True)
@@ -272,19 +292,7 @@ def _requester_conflicts(table: FamilyTable, state: FleetState, check: str) -> _
     hit = claim_conflicts(allc, a, b, check)
     a, b = a[hit], b[hit]
     t3 = time.perf_counter()
-    i = a - V                                     # requester-local index of the new claim
-    b_new = b >= V
-    b_req = state.requesting[owner[b]]
-    local = np.full(V, -1, dtype=np.intp)
-    local[req] = np.arange(R)
-    kinds = np.where(b_new, "new-new", np.where(b_req, "new-old", "new-fixed"))
-    return _Conflicts(
-        req=req, cur=cur, new=new,
-        fixed_hits=np.bincount(i[~b_req], minlength=R),
-        leq=np.stack([i[b_req & ~b_new], local[owner[b[b_req & ~b_new]]]], axis=1),
-        excl=np.stack([i[b_new], b[b_new] - V], axis=1),
-        edges=np.stack([owner[a], owner[b]], axis=1), edge_kinds=kinds,
-        seconds=(t1 - t0, t2 - t1, t3 - t2))
+    return _sorted_conflicts(state, req, cur, new, owner, a, b, (t1 - t0, t2 - t1, t3 - t2))
 
 
 def _result_claims(c: _Conflicts, go_r: np.ndarray) -> Claims | ReachClaims:
@@ -329,19 +337,7 @@ def _reach_conflicts(state: FleetState, cur: ReachClaims, new: ReachClaims, chec
     hit = claims_conflict(allc, a, allc, b, check) if len(a) else np.zeros(0, dtype=bool)
     a, b = a[hit], b[hit]
     t3 = time.perf_counter()
-    i = a - V
-    b_new = b >= V
-    b_req = state.requesting[owner[b]]
-    local = np.full(V, -1, dtype=np.intp)
-    local[req] = np.arange(R)
-    kinds = np.where(b_new, "new-new", np.where(b_req, "new-old", "new-fixed"))
-    return _Conflicts(
-        req=req, cur=cur, new=new,
-        fixed_hits=np.bincount(i[~b_req], minlength=R),
-        leq=np.stack([i[b_req & ~b_new], local[owner[b[b_req & ~b_new]]]], axis=1),
-        excl=np.stack([i[b_new], b[b_new] - V], axis=1),
-        edges=np.stack([owner[a], owner[b]], axis=1), edge_kinds=kinds,
-        seconds=(t1 - t0, t2 - t1, t3 - t2))
+    return _sorted_conflicts(state, req, cur, new, owner, a, b, (t1 - t0, t2 - t1, t3 - t2))
 
 
 def _decision(state: FleetState, c: _Conflicts, go_r: np.ndarray, waited_r: np.ndarray,
