@@ -297,20 +297,18 @@ def arrived_sets_warning(a: RunData, b: RunData) -> str | None:
             f"'own arrived' rows compare different vehicles; read the 'paired' and 'demand (censored)' rows")
 
 
-def _print_frame(df: pd.DataFrame, landed: dict | None = None) -> str:
-    """``df`` as text, every number rounded by its metric's meaning (:mod:`analysis.readable`).
+def frame_cells(df: pd.DataFrame, landed: dict | None = None) -> list[list[str]]:
+    """The cells of ``df`` as text, every number rounded by its metric's meaning (:mod:`analysis.readable`).
 
     ``landed`` maps a value column (``run``, ``vs``) to whether that run landed a vehicle:
-    where it did not, a statistic over arrived vehicles reads "no vehicle arrived"."""
+    where it did not, a statistic over arrived vehicles reads "no vehicle arrived" (else "-")."""
     from analysis.readable import fmt
 
     landed = landed or {}
-
-    cols = list(df.columns)
     body = []
     for _, r in df.iterrows():
         line = []
-        for c in cols:
+        for c in df.columns:
             v = r[c]
             if c in ("run", "vs", "difference"):
                 none = "no vehicle arrived" if (c in landed and not landed[c] and r["metric"] in DISTRIBUTIONS
@@ -323,6 +321,13 @@ def _print_frame(df: pd.DataFrame, landed: dict | None = None) -> str:
             else:
                 line.append(str(v))
         body.append(line)
+    return body
+
+
+def _print_frame(df: pd.DataFrame, landed: dict | None = None) -> str:
+    """``df`` as aligned text, cells as :func:`frame_cells` writes them."""
+    cols = list(df.columns)
+    body = frame_cells(df, landed)
     widths = [max([len(c)] + [len(b[i]) for b in body]) for i, c in enumerate(cols)]
     text = lambda cells: "  ".join(  # noqa: E731
         (x.ljust(w) if i < (3 if "over" in cols else 2) else x.rjust(w)) for i, (x, w) in enumerate(zip(cells, widths)))

@@ -52,8 +52,8 @@ def write_html_report(run_dir, vs_dir=None, plots: dict | None = None) -> Path:
     plots : dict, optional
         ``{kind: path}`` of the plots written (:func:`analysis.plots.write_plots`).
     """
-    from analysis.readable import fmt
-    from analysis.report import SUMMARY_ROWS, arrived_sets_warning, format_summary, load_run, report_table
+    from analysis.report import (SUMMARY_ROWS, arrived_sets_warning, format_summary, frame_cells, load_run,
+                                 report_table)
 
     run_dir = Path(run_dir)
     a = load_run(run_dir)
@@ -79,21 +79,7 @@ def write_html_report(run_dir, vs_dir=None, plots: dict | None = None) -> Path:
     first_num = cols.index("run") if "run" in cols else len(cols)
     if "n" in cols:
         first_num = min(first_num, cols.index("n"))
-    rows = []
-    for _, r in df.iterrows():
-        row = []
-        for c in cols:
-            v = r[c]
-            if c in ("run", "vs", "difference"):
-                row.append(fmt(v, r["metric"], r["statistic"]))
-            elif c == "ratio":
-                row.append(fmt(v, "ratio"))
-            elif c == "n":
-                row.append(fmt(v, "vehicles"))
-            else:
-                row.append(str(v))
-        rows.append(row)
-    parts.append(_table(cols, rows, first_num))
+    parts.append(_table(cols, frame_cells(df), first_num))
     if plots:
         parts.append("<h2>Plots</h2>")
         for kind, path in plots.items():
