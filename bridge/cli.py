@@ -203,7 +203,8 @@ def _cmd_sweep(args) -> int:
         settings = SweepSettings(
             scenario=args.scenario, seeds=tuple(args.seeds), out=Path(args.out), tm=tuple(args.tm or ()),
             check=tuple(args.check or ()), switching=tuple(args.switching or ()),
-            disturbance=tuple(args.disturbance or ()), solver=tuple(args.solver or ()), duration_s=args.duration,
+            disturbance=tuple(args.disturbance or ()), solver=tuple(args.solver or ()),
+            signals=tuple(args.signals or ()), pedestrians=tuple(args.pedestrians or ()), duration_s=args.duration,
             baseline=args.baseline, log=args.log, workers=args.workers, scheduler=args.scheduler,
             vclass=args.vclass, vehicles=args.vehicles)
         df = sweep(settings, quiet=args.quiet)
@@ -269,6 +270,11 @@ SEED_HELP = ("seed of the run: draws a generated scenario's demand (randomTrips'
              "is its own and does not change. Default: the scenario's seed (0 for free-plane scenarios)")
 
 
+SIGNALS_HELP = "SUMO's traffic lights: obey (default) or ignore (the TM alone, AIM-style)"
+PEDESTRIANS_HELP = ("guard (default): no claim over a crossing or walking area a pedestrian can reach in time; "
+                    "ignore: vehicles disregard pedestrians (comparison only)")
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="muvsim", description="muvsim: collision-free co-simulation of automated vehicles (set-theoretic "
@@ -302,14 +308,11 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--disturbance", choices=["random", "adversarial", "none"], default=None)
     r.add_argument("--baseline", choices=["sumo"], default=None,
                    help="drive the same demand by SUMO itself (no muvsim control)")
-    r.add_argument("--pedestrians", choices=["guard", "ignore"], default="guard",
-                   help="guard (default): no claim over a crossing or walking area a pedestrian can reach "
-                        "in time; ignore: vehicles disregard pedestrians (comparison only)")
+    r.add_argument("--pedestrians", choices=["guard", "ignore"], default="guard", help=PEDESTRIANS_HELP)
     r.add_argument("--gui", action="store_true", help="sumo-gui (needs a display)")
     r.add_argument("--quiet", action="store_true", help="no progress bar")
     r.add_argument("--solver", choices=["exact", "daqp", "proxsuite"], default="exact")
-    r.add_argument("--signals", choices=["obey", "ignore"], default=None,
-                   help="SUMO's traffic lights: obey (default) or ignore (the TM alone, AIM-style)")
+    r.add_argument("--signals", choices=["obey", "ignore"], default=None, help=SIGNALS_HELP)
     r.add_argument("--duration", type=_duration, default=None, metavar="S", help=DURATION_HELP)
     r.add_argument("--vehicles", type=int, default=8, help="vehicles in swap")
     r.add_argument("--log", choices=["none", "summary", "full"], default="summary",
@@ -343,6 +346,12 @@ def build_parser() -> argparse.ArgumentParser:
     w.add_argument("--disturbance", choices=["random", "adversarial", "none"], nargs="+", default=None)
     w.add_argument("--solver", choices=["exact", "daqp", "proxsuite"], nargs="+", default=None,
                    help="default exact")
+    w.add_argument("--signals", choices=["obey", "ignore"], nargs="+", default=None,
+                   help="as muvsim run --signals, one or more values to sweep: " + SIGNALS_HELP
+                        + "; SUMO scenarios only")
+    w.add_argument("--pedestrians", choices=["guard", "ignore"], nargs="+", default=None,
+                   help="as muvsim run --pedestrians, one or more values to sweep: " + PEDESTRIANS_HELP
+                        + "; SUMO scenarios only")
     w.add_argument("--duration", type=_duration, default=None, metavar="S",
                    help="each run's --duration (as muvsim run: " + DURATION_HELP.split(". ", 1)[0] + "; default: "
                         "until every vehicle has arrived, at most 3 x the departure window)")

@@ -1,7 +1,8 @@
 """``muvsim sweep``: one scenario over seeds and traffic-manager options, run in parallel with Dask.
 
 A sweep is the cross product of its seeds and option values (``tm``, ``check``,
-``switching``, ``disturbance``, ``solver``), plus, with ``baseline=True``, one
+``switching``, ``disturbance``, ``solver``, and for SUMO scenarios ``signals`` and
+``pedestrians``, as ``muvsim run --signals / --pedestrians``), plus, with ``baseline=True``, one
 run by SUMO's own drivers per seed.  Every run is a task on a Dask
 distributed cluster -- a local one started for the sweep (one worker process
 per run at a time, see below) or an existing one given by its scheduler
@@ -62,7 +63,11 @@ OPTION_CHOICES = {
     "switching": ("terminal", "early"),
     "disturbance": ("random", "adversarial", "none"),
     "solver": ("exact", "daqp", "proxsuite"),
+    "signals": ("obey", "ignore"),
+    "pedestrians": ("guard", "ignore"),
 }
+#: Options that only SUMO scenarios have (traffic lights, pedestrians), with ``muvsim run``'s defaults.
+SUMO_ONLY_DEFAULTS = {"signals": "obey", "pedestrians": "guard"}
 LOG_MODES = ("none", "summary", "full")
 DRIVERS = ("muvsim", "sumo")
 _SCHEMES = ("tcp", "tls", "ws", "wss", "ucx", "inproc")
@@ -83,8 +88,8 @@ VEHICLE_STATS = {"delay_s.mean": "delay_s_mean", "delay_s.p95": "delay_s_p95",
 COUNT_COLUMNS = ("seed", "vehicles_total", "vehicles_arrived", "collisions_sumo", "collisions_geometric",
                  "invariant_violations", "stop_commands", "halt_episodes")
 #: Columns of the sweep table, in order.
-ROW_COLUMNS = (("label", "driver", "seed", "tm", "check", "switching", "disturbance", "solver", "duration_s",
-                "run_dir") + SUMMARY_KPIS + tuple(VEHICLE_STATS.values()) + ("complete", "error", "worker"))
+ROW_COLUMNS = (("label", "driver", "seed", "tm", "check", "switching", "disturbance", "solver", "signals",
+                "pedestrians", "duration_s", "run_dir") + SUMMARY_KPIS + tuple(VEHICLE_STATS.values()) + ("complete", "error", "worker"))
 
 
 class SweepSettingsError(ValueError):
@@ -162,6 +167,12 @@ class RunSpec:
     tm, check, switching, disturbance : str or None
         Options; None takes the scenario's value.
     solver : {"exact", "daqp", "proxsuite"}
+    signals : {"obey", "ignore"} or None
+        ``muvsim run --signals``: SUMO's traffic lights obeyed or ignored (the TM alone); None:
+        ``obey``.  SUMO scenarios driven by muvsim only (free-plane scenarios have no lights, and
+        SUMO's own drivers always obey them).
+    pedestrians : {"guard", "ignore"} or None
+        ``muvsim run --pedestrians``; None: ``guard``.  Same scope as ``signals``.
     duration_s : float or None
         Simulated seconds; None takes the scenario's (free plane: until every vehicle is done).
     log : {"none", "summary", "full"}
@@ -181,6 +192,8 @@ class RunSpec:
     switching: str | None = None
     disturbance: str | None = None
     solver: str = "exact"
+    signals: str | None = None
+    pedestrians: str | None = None
     duration_s: float | None = None
     log: str = "none"
     vclass: str = "paper-a"
@@ -204,6 +217,19 @@ class RunSpec:
                 raise _fail(name, f"must be one of {', '.join(OPTION_CHOICES[name])} (or None: the scenario's)", v)
         if self.solver not in OPTION_CHOICES["solver"]:
             raise _fail("solver", f"must be one of {', '.join(OPTION_CHOICES['solver'])}", self.solver)
+        for name in SUMO_ONLY_DEFAULTS:
+            v = getattr(self, name)
+            if v is None:
+                continue
+            if v not in OPTION_CHOICES[name]:
+                raise _fail(name, f"must be one of {', '.join(OPTION_CHOICES[name])} (or None: "
+                                  f"{SUMO_ONLY_DEFAULTS[name]})", v)
+            if is_free_plane(self.scenario):
+                raise _fail(name, f"the free-plane {self.scenario!r} has no traffic lights or pedestrians "
+                                  f"(a SUMO scenario only; leave it None)", v)
+            if self.driver == "sumo":
+                raise _fail(name, "SUMO's own drivers (driver 'sumo') use none of muvsim's options "
+                                  "(leave it None)", v)
         object.__setattr__(self, "duration_s", _check_duration("duration_s", self.duration_s))
         if self.log not in LOG_MODES:
             raise _fail("log", f"must be one of {', '.join(LOG_MODES)}", self.log)
@@ -227,7 +253,8 @@ class RunSpec:
             scenario=self.scenario, seed=self.seed, tm=self.tm, check=self.check, switching=self.switching,
             disturbance=self.disturbance, solver=self.solver, duration=self.duration_s,
             baseline="sumo" if self.driver == "sumo" else None, gui=False, quiet=True, log=self.log,
-            plots=False, vclass=self.vclass, vehicles=self.vehicles)
+            plots=False, vclass=self.vclass, vehicles=self.vehicles, signals=self.signals,
+            pedestrians=self.pedestrians)
         if not self.uses_sumo:
             for name, default in FREE_PLANE_DEFAULTS.items():
                 if getattr(opts, name) is None:
@@ -239,9 +266,11 @@ def _nan_row(spec: RunSpec, run_dir: Path) -> dict:
     row = {c: math.nan for c in ROW_COLUMNS}
     row.update(label=spec.label, driver=spec.driver, seed=spec.seed, tm=spec.tm, check=spec.check,
                switching=spec.switching, disturbance=spec.disturbance, solver=spec.solver,
+               signals=spec.signals, pedestrians=spec.pedestrians,
                duration_s=spec.duration_s, run_dir=str(run_dir), complete=False, error=None, worker=None)
     if spec.driver == "sumo":  # SUMO's drivers use none of muvsim's options
-        row.update(tm=None, check=None, switching=None, disturbance=None, solver=None)
+        row.update(tm=None, check=None, switching=None, disturbance=None, solver=None, signals=None,
+                   pedestrians=None)
     return row
 
 
@@ -252,7 +281,7 @@ def _row_from_run(spec: RunSpec, run_dir: Path, summary: dict) -> dict:
     row = _nan_row(spec, run_dir)
     opts = summary.get("options") or {}
     if spec.driver == "muvsim":  # what the run actually used (the scenario's values for options left out)
-        for name in ("tm", "check", "switching", "disturbance", "solver"):
+        for name in OPTION_CHOICES:
             if opts.get(name) is not None:
                 row[name] = opts[name]
     duration = opts.get("duration_s", opts.get("duration"))
@@ -357,8 +386,10 @@ class SweepSettings:
     out : Path
         Output directory: ``OUT/<label>/`` per run and ``OUT/sweep.csv``.  On an existing cluster it must
         be a path the workers can write (a shared file system) and the scenario a path they can read.
-    tm, check, switching, disturbance, solver : tuple of str
+    tm, check, switching, disturbance, solver, signals, pedestrians : tuple of str
         Values of each option to sweep (see :data:`OPTION_CHOICES`); ``solver`` defaults to ``("exact",)``.
+        ``signals`` and ``pedestrians`` mean what ``muvsim run --signals / --pedestrians`` do (defaults
+        ``obey`` and ``guard``); SUMO scenarios only (the baseline runs are SUMO's drivers either way).
     duration_s : float or None
         Simulated seconds of every run (None: the scenario's).
     baseline : bool
@@ -389,6 +420,8 @@ class SweepSettings:
     switching: tuple[str, ...] = ()
     disturbance: tuple[str, ...] = ()
     solver: tuple[str, ...] = ("exact",)
+    signals: tuple[str, ...] = ()
+    pedestrians: tuple[str, ...] = ()
     duration_s: float | None = None
     baseline: bool = False
     log: str = "none"
@@ -427,6 +460,9 @@ class SweepSettings:
                 raise _fail(name, "values must be distinct", values)
             if name == "solver" and not values:
                 values = ("exact",)
+            if name in SUMO_ONLY_DEFAULTS and values and is_free_plane(self.scenario):
+                raise _fail(name, f"the free-plane {self.scenario!r} has no traffic lights or pedestrians "
+                                  f"(a SUMO scenario only)", values)
             object.__setattr__(self, name, values)
         object.__setattr__(self, "duration_s", _check_duration("duration_s", self.duration_s))
         if not isinstance(self.baseline, bool):
@@ -471,7 +507,8 @@ class SweepSettings:
             s = str(Path(s).expanduser().absolute())  # workers may not share the client's working directory
         object.__setattr__(self, "scenario", s)
         # the scenario's own options (a .sumocfg: Scenario's defaults), used for options not swept
-        object.__setattr__(self, "_defaults", {n: getattr(loaded, n) for n in FREE_PLANE_DEFAULTS})
+        object.__setattr__(self, "_defaults", {**{n: getattr(loaded, n) for n in FREE_PLANE_DEFAULTS},
+                                               **SUMO_ONLY_DEFAULTS})
 
     def option_values(self, name: str) -> tuple:
         """Values run for option ``name``: the swept ones, else the scenario's own value."""
@@ -497,7 +534,8 @@ def plan(settings: SweepSettings) -> tuple[RunSpec, ...]:
             runs.append(RunSpec(label=_label(seed, [(n, opts[n]) for n in varied]), scenario=settings.scenario,
                                 seed=seed, driver="muvsim", tm=opts["tm"], check=opts["check"],
                                 switching=opts["switching"], disturbance=opts["disturbance"],
-                                solver=opts["solver"], duration_s=settings.duration_s, log=settings.log,
+                                solver=opts["solver"], signals=opts["signals"], pedestrians=opts["pedestrians"],
+                                duration_s=settings.duration_s, log=settings.log,
                                 vclass=settings.vclass, vehicles=settings.vehicles))
         if settings.baseline:
             runs.append(RunSpec(label=f"seed{seed}_baseline-sumo", scenario=settings.scenario, seed=seed,

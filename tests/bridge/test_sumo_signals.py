@@ -2,43 +2,15 @@
 every vehicle against its next light, each step), vehicles still arrive, and ``--signals ignore``
 passes reds (and ``red_violations`` counts them).
 
-The network is written by the test (netgenerate: a 3 x 3 grid, one traffic light at the centre
-``B1`` with SUMO's static program of 17 s green, 3 s yellow per direction), the demand four
-crossing streams through it.
+The network is written by the ``tls_cfg`` fixture (tests/bridge/conftest.py: netgenerate, a 3 x 3
+grid, one traffic light at the centre ``B1`` with SUMO's static program of 17 s green, 3 s yellow
+per direction), the demand four crossing streams through it.
 """
 
 import json
-import subprocess
-import sys
-from pathlib import Path
-
-import pytest
 
 import bridge.sumo_world as sumo_world
 from bridge.cli import main
-
-ROUTES = """<routes>
-  <vType id="car" length="5" width="1.8"/>
-  <route id="e" edges="A1B1 B1C1"/><flow id="east" type="car" begin="0" end="48" period="8" route="e"/>
-  <route id="w" edges="C1B1 B1A1"/><flow id="west" type="car" begin="2" end="48" period="8" route="w"/>
-  <route id="n" edges="B0B1 B1B2"/><flow id="north" type="car" begin="4" end="48" period="8" route="n"/>
-  <route id="s" edges="B2B1 B1B0"/><flow id="south" type="car" begin="6" end="48" period="8" route="s"/>
-</routes>
-"""
-
-
-@pytest.fixture(scope="module")
-def tls_cfg(tmp_path_factory):
-    d = tmp_path_factory.mktemp("tls")
-    subprocess.run([str(Path(sys.executable).parent / "netgenerate"), "--grid", "--grid.x-number", "3", "--grid.y-number", "3", "--grid.length", "80",
-                    "--default.lanenumber", "1", "--tls.set", "B1", "--tls.cycle.time", "40",
-                    "--tls.yellow.time", "3", "-o", str(d / "net.net.xml")], check=True, capture_output=True)
-    (d / "demand.rou.xml").write_text(ROUTES)
-    cfg = d / "tls.sumocfg"
-    cfg.write_text('<configuration><input><net-file value="net.net.xml"/><route-files value="demand.rou.xml"/>'
-                   '</input><time><begin value="0"/><end value="150"/><step-length value="0.1"/></time>'
-                   '</configuration>')
-    return cfg
 
 
 class RedWatch:

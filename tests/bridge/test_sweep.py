@@ -157,6 +157,12 @@ def test_cli_sweep_bad_settings_exit_2_naming_the_field(tmp_path, capsys):
     (dict(scenario="swap", baseline=True), "baseline"),
     (dict(baseline="yes"), "baseline"),
     (dict(vehicles=0), "vehicles"),
+    (dict(signals=("red",)), "signals"),
+    (dict(signals="ignore"), "signals"),
+    (dict(signals=("obey", "obey")), "signals"),
+    (dict(scenario="swap", signals=("ignore",)), "signals"),
+    (dict(pedestrians=("off",)), "pedestrians"),
+    (dict(scenario="single", pedestrians=("guard",)), "pedestrians"),
 ])
 def test_settings_are_validated_with_the_field_named(change, field, tmp_path):
     kw = dict(scenario="grid", seeds=(1, 2), out=tmp_path)
@@ -178,3 +184,43 @@ def test_settings_accept_lists_and_plan_labels_the_varied_options(tmp_path):
         RunSpec(label="seed1:sumo", scenario="grid", seed=1)  # SUMO reads host:port in such a path
     with pytest.raises(SweepSettingsError, match="labels must be distinct"):
         run_plan([RunSpec(label="a", scenario="single", seed=0)] * 2, tmp_path)
+
+
+def test_signals_and_pedestrians_are_run_options_of_sumo_runs_only(tmp_path):
+    """Default: muvsim run's (obey, guard) in every muvsim row of a SUMO scenario, none for SUMO's
+    drivers or a free-plane scenario; swept values label the runs; RunSpec refuses them where they
+    mean nothing, naming the field."""
+    runs = plan(SweepSettings(scenario="grid", seeds=(1,), out=tmp_path, baseline=True))
+    assert [(r.label, r.signals, r.pedestrians) for r in runs] == [("seed1", "obey", "guard"),
+                                                                   ("seed1_baseline-sumo", None, None)]
+    assert vars(runs[0].options())["signals"] == "obey" and vars(runs[0].options())["pedestrians"] == "guard"
+    runs = plan(SweepSettings(scenario="grid", seeds=(1,), out=tmp_path, signals=["obey", "ignore"],
+                              pedestrians=["ignore"]))
+    assert [(r.label, r.signals, r.pedestrians) for r in runs] == [("seed1_signals-obey", "obey", "ignore"),
+                                                                   ("seed1_signals-ignore", "ignore", "ignore")]
+    assert [(r.signals, r.pedestrians) for r in plan(SweepSettings(scenario="swap", seeds=(1,), out=tmp_path))] \
+        == [(None, None)]
+    for kw, field in ((dict(scenario="single", signals="ignore"), "signals"),
+                      (dict(scenario="grid", driver="sumo", pedestrians="guard"), "pedestrians"),
+                      (dict(scenario="grid", signals="amber"), "signals")):
+        with pytest.raises(SweepSettingsError, match=rf"^{field}: "):
+            RunSpec(label="a", seed=1, **kw)
+
+
+def test_cli_sweep_signals_reach_the_runs(tls_cfg, tmp_path, capsys):
+    """`muvsim sweep CFG --signals obey ignore --pedestrians ignore` on a signalised network (real SUMO):
+    two runs, each run with the values given (its summary.json), the obey run withholding requests at
+    the light and passing no red, the ignore run withholding none."""
+    out = tmp_path / "sw"
+    rc = main(["sweep", str(tls_cfg), "--out", str(out), "--seeds", "1", "--signals", "obey", "ignore",
+               "--pedestrians", "ignore", "--duration", "40", "--workers", "1", "--quiet"])
+    printed = capsys.readouterr().out
+    assert rc == 0, printed
+    df = pd.read_csv(out / "sweep.csv").set_index("label")
+    assert list(df.index) == ["seed1_signals-obey", "seed1_signals-ignore"] and df["complete"].all()
+    assert df["signals"].tolist() == ["obey", "ignore"] and set(df["pedestrians"]) == {"ignore"}
+    obey, ignore = (json.loads((out / lb / "summary.json").read_text()) for lb in df.index)
+    assert (obey["options"]["signals"], ignore["options"]["signals"]) == ("obey", "ignore")
+    assert obey["options"]["pedestrians"] == ignore["options"]["pedestrians"] == "ignore"
+    assert obey["signal_withheld"] > 0 and obey["red_violations"] == 0
+    assert ignore["signal_withheld"] == 0
