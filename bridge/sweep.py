@@ -675,10 +675,24 @@ TABLE_COLUMNS = ("label", "complete", "vehicles_arrived", "vehicles_total", "col
                  "delay_s_mean", "delay_s_p95", "halt_episodes_mean", "rtf", "wall_s")
 
 
+def _figure_of(column: str) -> tuple[str, str]:
+    """``(name, statistic)`` of a table column for :func:`analysis.readable.fmt` (``delay_s_mean`` is the
+    mean of ``delay_s``: seconds)."""
+    for key, col in VEHICLE_STATS.items():
+        if col == column:
+            name, stat = key.split(".", 1)
+            return name, stat
+    return column, ""
+
+
 def format_table(df: pd.DataFrame) -> str:
-    """The sweep table's main columns as text for the terminal (errors listed below it)."""
+    """The sweep table's main columns as text for the terminal (errors listed below it), each figure
+    rounded as ``muvsim run`` and ``muvsim report`` print it (:mod:`analysis.readable`)."""
+    from analysis.readable import fmt
+
     cols = [c for c in TABLE_COLUMNS if c in df]
-    text = df[cols].to_string(index=False, float_format=lambda x: f"{x:.2f}", na_rep="-")
+    cells = pd.DataFrame({c: [fmt(None if v is pd.NA else v, *_figure_of(c)) for v in df[c]] for c in cols})
+    text = cells.to_string(index=False)
     failed = df[~df["complete"].astype(bool)]
     for _, r in failed.iterrows():
         text += f"\n{r['label']}: {r['error']}"

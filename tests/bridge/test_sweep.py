@@ -9,7 +9,7 @@ import pytest
 
 from bridge.cli import main
 from bridge.sumo_world import run_sumo
-from bridge.sweep import ROW_COLUMNS, RunSpec, SweepSettings, SweepSettingsError, plan, run_plan, sweep
+from bridge.sweep import ROW_COLUMNS, RunSpec, SweepSettings, SweepSettingsError, format_table, plan, run_plan, sweep
 from sumo_nets.generate import write_sumocfg
 
 SMALL = """\
@@ -224,3 +224,20 @@ def test_cli_sweep_signals_reach_the_runs(tls_cfg, tmp_path, capsys):
     assert obey["options"]["pedestrians"] == ignore["options"]["pedestrians"] == "ignore"
     assert obey["signal_withheld"] > 0 and obey["red_violations"] == 0
     assert ignore["signal_withheld"] == 0
+
+
+def test_printed_table_is_rounded_as_muvsim_run_prints_figures():
+    """analysis/readable.py's rule: seconds (also a mean or p95 of delay_s) to 0.1, ratios (rtf) and
+    means of counts to 0.01, counts as integers, missing as '-'; the failed run's error below."""
+    df = pd.DataFrame(dict(
+        label=["a", "b"], complete=[True, False], vehicles_arrived=pd.array([3, None], dtype="Int64"),
+        vehicles_total=pd.array([10, 10], dtype="Int64"), mean_travel_time_s=[60.5172, float("nan")],
+        delay_s_mean=[2.66482, float("nan")], delay_s_p95=[7.1234, float("nan")],
+        halt_episodes_mean=[1.33333, float("nan")], rtf=[16.327, float("nan")], wall_s=[11.025, 0.31],
+        error=[None, "boom"]))
+    lines = format_table(df).splitlines()
+    assert lines[0].split() == ["label", "complete", "vehicles_arrived", "vehicles_total", "mean_travel_time_s",
+                                "delay_s_mean", "delay_s_p95", "halt_episodes_mean", "rtf", "wall_s"]
+    assert lines[1].split() == ["a", "yes", "3", "10", "60.5", "2.7", "7.1", "1.33", "16.33", "11.0"]
+    assert lines[2].split() == ["b", "no", "-", "10", "-", "-", "-", "-", "-", "0.3"]
+    assert lines[3] == "b: boom"
