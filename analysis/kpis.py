@@ -57,9 +57,11 @@ VEHICLE_COLUMNS = ("id", "vclass", "departure_s", "admitted_s", "admission_delay
                    "closest_m", "speed_limit_excess_max")
 
 #: A vehicle counts in ``vehicles_over_limit`` when its speed exceeded its lane's limit by more than
-#: this (m/s): twice the urban classes' velocity disturbance per step (d̄ = 0.005 m/s), the
-#: excess the controller cannot prevent (it bounds the nominal next speed).
-SPEED_LIMIT_KPI_TOL = 0.01
+#: this (m/s): the excess the controller cannot prevent, for the urban classes (d̄ = 0.005 in
+#: position and velocity, ū = 3, a_c = 2.5, Ts = 0.1) at limits >= 3 m/s.  It bounds the NOMINAL
+#: next speed (the disturbance adds d̄) at the front position predicted one step on (off by up to
+#: d̄ + ū Ts^2 / 2, which the braking envelope turns into a_c (d̄ + ū Ts^2/2) / v_lim <= 0.017).
+SPEED_LIMIT_KPI_TOL = 0.025
 
 #: Columns of the per-step table every run has (others, e.g. ``min_separation_m``, are kept).
 STEP_COLUMNS = ("t_s", "active", "requests", "grants", "denials", "edges", "admitted", "tm_ms", "tm_decide_ms",

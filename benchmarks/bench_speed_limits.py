@@ -18,19 +18,21 @@ import numpy as np
 from bridge.cosim import Cosim, CosimSettings, VehicleSpec
 from bridge.waypoints import subsample
 from controllers.classes import builtin_classes
+from controllers.speed_limits import SpeedSettings
 
 OUT = Path(__file__).resolve().parent / "results"
 
 
 def run(controller: str, slow: float, zone=(200.0, 260.0), length=400.0, vclass="car", seed=0,
-        disturbance="random"):
+        disturbance="random", lane_limits=True):
     """One run; returns (t, centre arc, speed, lane limit at the front) per step and the figures."""
     classes = builtin_classes()
     vc = classes[vclass]
     W, arc = subsample(np.array([[0.0, 0.0], [length, 0.0]]), vc.model.delta)
     lim = np.where((arc >= zone[0]) & (arc <= zone[1]), slow, 13.89)
     spec = VehicleSpec("v0", vclass, W, speed_limits=lim)
-    sim = Cosim(classes, [spec], CosimSettings(controller=controller, disturbance=disturbance, seed=seed))
+    sim = Cosim(classes, [spec], CosimSettings(controller=controller, disturbance=disturbance, seed=seed,
+                                                     speed=SpeedSettings(lane_limits=lane_limits)))
     sim._admit(0.0)
     rows = []
     g = sim.groups[vclass]
@@ -53,7 +55,7 @@ def run(controller: str, slow: float, zone=(200.0, 260.0), length=400.0, vclass=
         "max_speed": round(float(prof[:, 2].max()), 4),
         "travel_time_s": None if rec.arrived_s is None else round(rec.arrived_s - rec.admitted_s, 2),
         "free_flow_s": round(rec.free_flow_s, 2),
-        "invariant_violations": sim.invariant_violations,
+        "invariant_violations": sim.invariant_violations, "lane_limits": lane_limits,
     }
 
 

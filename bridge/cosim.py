@@ -264,8 +264,8 @@ class Cosim:
         if rs is None:
             vc, sp = self.classes[spec.vclass], self.settings.speed
             try:
-                rs = route_speeds(spec.waypoints, spec.speed_limits if sp.lane_limits else None, vc.v_max,
-                                  _look_ahead_decel(vc), self._lat_accel, sp.curve_window_m)
+                rs = route_speeds(spec.waypoints, spec.speed_limits, vc.v_max, _look_ahead_decel(vc),
+                                  self._lat_accel, sp.curve_window_m, apply_lanes=sp.lane_limits)
             except ValueError as exc:
                 raise ValueError(f"vehicle {spec.id}: {exc}") from None
             self._speeds[spec.id] = rs

@@ -19,8 +19,9 @@ Look-ahead
     position ``s`` in gap ``j`` is ``min(lim_j, sqrt(env_{j+1}^2 + 2 a_c (S_j - s)))``.
 Curvature
     ``kappa`` at a waypoint is the heading change of the polyline over the arc window
-    ``[s - w, s + w]`` divided by its length (``w = SpeedSettings.curve_window_m``): a
-    polyline kink of a few degrees between two long straight pieces is not a curve.
+    ``[s - w, s + w]`` divided by its length (``w = SpeedSettings.curve_window_m``; the heading
+    taken linear between segment midpoints): a kink of a few degrees between two long straight
+    pieces is a gentle curve, not a sharp one.
 """
 
 from __future__ import annotations
@@ -114,19 +115,18 @@ def curvature(W: np.ndarray, window_m: float) -> np.ndarray:
     if len(W) < 3:
         return np.zeros(len(W))
     h = np.unwrap(np.arctan2(d[:, 1], d[:, 0]))
-    va = arc[1:-1]                                          # interior vertices' arcs
-    acc = np.concatenate([[0.0], np.cumsum(np.diff(h))])    # heading change after 0, 1, ... vertices
+    # heading as a continuous function of arc: each segment's heading at its midpoint, linear in
+    # between (exact for a uniformly sampled circle), held at the ends
+    mid = 0.5 * (arc[:-1] + arc[1:])
     lo = np.clip(arc - window_m, 0.0, arc[-1])
     hi = np.clip(arc + window_m, 0.0, arc[-1])
-    n_lo = np.searchsorted(va, lo, side="left")             # vertices strictly before lo
-    n_hi = np.searchsorted(va, hi, side="right")            # vertices at or before hi
-    turn = np.abs(acc[n_hi] - acc[n_lo])
+    turn = np.abs(np.interp(hi, mid, h) - np.interp(lo, mid, h))
     span = np.maximum(hi - lo, 1e-9)
     return turn / span
 
 
 def route_speeds(W: np.ndarray, limits: np.ndarray | None, v_max: float, decel: float,
-                 lat_accel: float | None = None, window_m: float = 4.0) -> RouteSpeeds:
+                 lat_accel: float | None = None, window_m: float = 4.0, apply_lanes: bool = True) -> RouteSpeeds:
     """The tables of one route.
 
     Parameters
@@ -143,6 +143,9 @@ def route_speeds(W: np.ndarray, limits: np.ndarray | None, v_max: float, decel: 
         ``a_lat`` of the curve speed; None: no curve speeds.
     window_m : float
         Curvature window half-width (m).
+    apply_lanes : bool
+        Whether ``bound`` holds the lane limits (``lane`` always does: the KPI measures against
+        them even when the controller ignores them).
 
     Raises
     ------
@@ -168,7 +171,7 @@ def route_speeds(W: np.ndarray, limits: np.ndarray | None, v_max: float, decel: 
     lane = np.empty(K)
     lane[1:] = np.minimum(pt[:-1], pt[1:])
     lane[0] = lane[1]
-    bound = lane.copy()
+    bound = lane.copy() if apply_lanes else np.full(K, float(v_max))
     if lat_accel is not None:
         kap = curvature(W, window_m)
         with np.errstate(divide="ignore"):
