@@ -83,6 +83,17 @@ class SpeedSettings:
         if isinstance(w, bool) or not isinstance(w, (int, float)) or not 0 < w < np.inf:
             raise SettingsError(f"SpeedSettings.curve_window_m: must be a distance > 0 m, got {w!r}")
 
+    @classmethod
+    def from_options(cls, opts) -> "SpeedSettings":
+        """From command-line options ``speed_limits`` (``obey`` / ``ignore``) and ``lat_accel``
+        (m/s^2; 0 turns curve speeds off); absent options take the defaults."""
+        mode = getattr(opts, "speed_limits", None) or "obey"
+        if mode not in ("obey", "ignore"):
+            raise SettingsError(f"--speed-limits: must be 'obey' or 'ignore', got {mode!r}")
+        a = getattr(opts, "lat_accel", None)
+        a = cls.lat_accel if a is None else a
+        return cls(lane_limits=mode == "obey", curves=a > 0, lat_accel=a if a > 0 else cls.lat_accel)
+
 
 @dataclass(frozen=True)
 class RouteSpeeds:

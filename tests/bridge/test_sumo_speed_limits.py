@@ -50,3 +50,15 @@ def test_a_car_keeps_a_5_mps_lane_limit_in_sumo(slow_road, tmp_path, controller)
     assert v.loc["v", "free_flow_s"] > 300 / 13.89 + 5 and v.loc["v", "delay_s"] >= 0
     if controller == "authority":  # and it still cruises on the fast edges
         assert v.loc["v", "mean_speed_mps"] > 6.0
+
+
+def test_ignoring_the_limits_makes_the_kpi_fire(slow_road, tmp_path):
+    """--speed-limits ignore: the car crosses the 5 m/s edge at the class bound and the KPI says so
+    (measured 8.89 m/s over); the run still records the option."""
+    out = tmp_path / "ign"
+    rc = main(["run", str(slow_road), "--out", str(out), "--quiet", "--log", "none", "--controller", "authority",
+               "--speed-limits", "ignore", "--duration", "150"])
+    s = json.loads((out / "summary.json").read_text())
+    assert rc == 0 and s["complete"], s.get("error")
+    assert s["speed_limit_excess_max"] > 8.0 and s["vehicles_over_limit"] == 1
+    assert s["options"]["speed_limits"] == "ignore"
