@@ -55,6 +55,7 @@ class _Group:
         self.req_l = np.zeros(0, dtype=np.intp)  # request indices of the last TM state
         self.cap = np.zeros(0)                   # this step's speed bounds (m/s), see speed_caps
         self.excess = np.zeros(0)                # largest speed over the front's lane limit so far (m/s)
+        self.binds = np.zeros(0, dtype=bool)     # whether some speed bound of the route lies below v_max
 
     def add(self, vid, W, H, x0, l0, speeds: RouteSpeeds | None = None):
         K = len(W)
@@ -97,6 +98,8 @@ class _Group:
         self.req_l = np.append(self.req_l, 0)
         self.cap = np.append(self.cap, self.v_max)
         self.excess = np.append(self.excess, -np.inf)
+        self.binds = np.append(self.binds, speeds is not None and
+                               bool(np.min(speeds.bound) < self.v_max - tol.SPEED_BOUND_TOL))
 
     def remove(self, mask):
         keep = ~mask
@@ -107,7 +110,7 @@ class _Group:
         self.start, self.K = self.start[keep], self.K[keep]
         self.speed_sum, self.steps = self.speed_sum[keep], self.steps[keep]
         self.denied_last, self.req_l = self.denied_last[keep], self.req_l[keep]
-        self.cap, self.excess = self.cap[keep], self.excess[keep]
+        self.cap, self.excess, self.binds = self.cap[keep], self.excess[keep], self.binds[keep]
 
     @property
     def at_last(self) -> np.ndarray:
@@ -150,17 +153,21 @@ class _Group:
         """Extra tube levels (steps) each vehicle needs to come to rest at waypoint ``k + offset``
         keeping its speed bounds, over what it needs without them (plus ``slack_steps``);
         0 where no bound binds.  See :class:`controllers.speed_limits.SpeedSettings`."""
+        out = np.zeros(len(self.ids), dtype=np.intp)
+        r = np.flatnonzero(self.binds)  # routes without a bound below v_max need no slack
+        if not len(r):
+            return out
         s, v = self._along(X)
+        s, v = s[r], v[r]
         arc, bound, env, lane = self._tables()
-        first, last = self.start, self.start + self.K - 1
-        stop = arc[first + np.minimum(self.k + offset, self.K - 1)]
+        first, last = self.start[r], self.start[r] + self.K[r] - 1
+        stop = arc[first + np.minimum(self.k[r] + offset, self.K[r] - 1)]
         args = (first, last, 0.5 * self.vclass.length, self.decel, self.u_max, self.v_max, Ts)
-        with_caps = plan_steps(s, v, stop, arc, bound, env, lane, *args)
-        free = np.full_like(arc, self.v_max)
-        without = plan_steps(s, v, stop, arc, free, free, free, *args)
+        with_caps, without = plan_steps(s, v, stop, arc, bound, env, lane, *args)
         extra = with_caps - without
-        bind = (extra > 0) | (cap < self.v_max - tol.SPEED_BOUND_TOL)
-        return np.where(bind, np.maximum(extra, 0) + self.slack_steps, 0)
+        bind = (extra > 0) | (np.asarray(cap)[r] < self.v_max - tol.SPEED_BOUND_TOL)
+        out[r] = np.where(bind, np.maximum(extra, 0) + self.slack_steps, 0)
+        return out
 
 
 def _headings(W: np.ndarray) -> np.ndarray:

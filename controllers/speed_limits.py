@@ -247,24 +247,35 @@ def free_flow_time(arc: np.ndarray, lane: np.ndarray, front_offset: float) -> fl
 
 
 def plan_steps(s0: np.ndarray, v0: np.ndarray, stop: np.ndarray, arc, bound, env, lane, first, last,
-               front_offset, decel, accel: float, v_max: float, Ts: float, samples: int = 24) -> np.ndarray:
+               front_offset, decel, accel: float, v_max: float, Ts: float,
+               samples: int = 24) -> tuple[np.ndarray, np.ndarray]:
     """Steps (ceil, >= 0) a vehicle at centre arc ``s0`` with speed ``v0`` needs to come to rest at
-    ``stop`` (centre arc) driving at the bound with look-ahead (:func:`bound_at`, front
-    ``front_offset`` m ahead), accelerating at ``accel`` and braking at ``decel`` at the end.
+    ``stop`` (centre arc), accelerating at ``accel`` and braking at ``decel`` at the end: driving
+    at the bound with look-ahead (:func:`bound_at`, front ``front_offset`` m ahead), and at
+    ``v_max`` alone (the difference is what the bounds cost).
 
     Midpoint rule on ``ds / v(s)`` over ``samples`` pieces; the last piece, where ``v -> 0``, is
-    integrated exactly for the final braking (``sqrt(2 ds / a_c)``).  Vectorised over vehicles."""
+    integrated exactly for the final braking (``sqrt(2 ds / a_c)``).  Vectorised over vehicles.
+
+    Returns
+    -------
+    with_bounds, without : ndarray of int, shape (V,)
+    """
     s0 = np.asarray(s0, dtype=float)
     V = len(s0)
-    span = np.maximum(np.asarray(stop, dtype=float) - s0, 0.0)
+    stop = np.asarray(stop, dtype=float)
+    span = np.maximum(stop - s0, 0.0)
     ds = span / samples
     mid = s0[:, None] + ds[:, None] * (np.arange(samples) + 0.5)[None, :]          # (V, M)
-    rep = lambda a: np.repeat(np.broadcast_to(np.asarray(a), (V,)), samples)  # noqa: E731
-    cap, _ = bound_at(arc, bound, env, lane, rep(first), rep(last), (mid + front_offset).ravel(), rep(decel))
-    cap = cap.reshape(V, samples)
-    brake = np.sqrt(2.0 * np.asarray(decel, dtype=float).reshape(-1, 1) * np.maximum(stop[:, None] - mid, 0.0))
-    speed_up = np.sqrt(np.maximum(v0, 0.0)[:, None] ** 2 + 2.0 * accel * (mid - s0[:, None]))
-    v = np.minimum(np.minimum(cap, v_max), np.minimum(brake, speed_up))
-    t = np.sum(ds[:, None] / np.maximum(v[:, :-1], 1e-3), axis=1) if samples > 1 else np.zeros(V)
-    t += np.sqrt(2.0 * ds / np.asarray(decel, dtype=float))
-    return np.ceil(t / Ts).astype(np.intp)
+    cap, _ = bound_at(arc, bound, env, lane, np.repeat(first, samples), np.repeat(last, samples),
+                      (mid + front_offset).ravel(), decel)
+    a_c = np.asarray(decel, dtype=float)
+    brake = np.sqrt(2.0 * a_c * np.maximum(stop[:, None] - mid, 0.0))
+    free = np.minimum(np.minimum(brake, v_max),
+                      np.sqrt(np.maximum(v0, 0.0)[:, None] ** 2 + 2.0 * accel * (mid - s0[:, None])))
+    last_piece = np.sqrt(2.0 * ds / a_c)
+    out = []
+    for v in (np.minimum(free, cap.reshape(V, samples)), free):
+        t = np.sum(ds[:, None] / np.maximum(v[:, :-1], 1e-3), axis=1) + last_piece
+        out.append(np.ceil(t / Ts).astype(np.intp))
+    return out[0], out[1]
