@@ -32,7 +32,9 @@ class _Group:
         self.ctl = ctl
         self.decel = float(decel)
         self.slack_steps = int(slack_steps)
-        self.v_max = float(vclass.model.z_bounds[1][0])
+        # the speed a bound must lie below to bind: the class bound, or the fastest speed any of
+        # its tubes allows if that is lower (the paper's sets: 6.56 m/s for the car)
+        self.v_max = min(float(vclass.model.z_bounds[1][0]), float(getattr(ctl, "v_top", np.inf)))
         self.u_max = float(vclass.model.u_bounds[1][0])
         self._arc_next = 0.0
         n = vclass.model.n

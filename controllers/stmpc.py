@@ -185,6 +185,15 @@ class STMPC:
         self._along = next(k for k, t in enumerate(self._tables) if 0 in t.states)
         st = list(self._tables[self._along].states)
         self._along_v = st.index(2) if 2 in st else None
+        # the fastest along-road speed any tube allows (T^N is the largest set): a speed bound at or
+        # above it can never bind
+        f = family.factors[self._along]
+        if self._along_v is None:
+            self.v_top = float("inf")
+        else:
+            e = np.zeros(len(st))
+            e[self._along_v] = 1.0
+            self.v_top = float(f.levels[self.N].support(e[None])[0])
 
     # ------------------------------------------------------------------ On-1
     def error(self, X: np.ndarray, centres: np.ndarray, heading=None) -> np.ndarray:
