@@ -518,8 +518,9 @@ class Cosim:
                 continue
             m = g.vclass.model
             cen, hd, _ = g.centres()
-            cap, _ = g.speed_caps(s.Ts)
-            U = g.ctl.control(g.X, cen, g.l, ids=g.ids, heading=hd, v_cap=cap)
+            # the bounds of this step (computed with the requests: a switch moves the waypoint, not the
+            # vehicle, and the bounds depend on where the vehicle is)
+            U = g.ctl.control(g.X, cen, g.l, ids=g.ids, heading=hd, v_cap=g.cap)
             g.X, _ = plant_step(m, g.X, U, cen, s.disturbance, self.rng, heading=hd)
             l_new = g.ctl.index(g.X, cen, hd)
             bad = ~((l_new < g.l) | ((g.l == 0) & (l_new == 0)))

@@ -164,9 +164,17 @@ class _Group:
         arc, bound, env, lane = self._tables()
         first, last = self.start[r], self.start[r] + self.K[r] - 1
         stop = arc[first + np.minimum(self.k[r] + offset, self.K[r] - 1)]
-        args = (first, last, 0.5 * self.vclass.length, self.decel, self.u_max, self.v_max, Ts)
-        with_caps, without = plan_steps(s, v, stop, arc, bound, env, lane, *args)
-        extra = with_caps - without
+        half = 0.5 * self.vclass.length
+        extra = np.zeros(len(r), dtype=np.intp)
+        # A bound b at S (front arc) slows the plan only if b^2 + 2 a_c S < 2 a_c (stop + L/2): the
+        # braking to the stop is slower there otherwise.  Then the look-ahead bound at the front
+        # now lies below the braking speed to the stop now, so the plans are needed only there.
+        now, _ = bound_at(arc, bound, env, lane, first, last, s + half, self.decel)
+        need = np.flatnonzero(now ** 2 < 2.0 * self.decel * np.maximum(stop - s, 0.0) + tol.SPEED_BOUND_TOL)
+        if len(need):
+            with_caps, without = plan_steps(s[need], v[need], stop[need], arc, bound, env, lane, first[need],
+                                            last[need], half, self.decel, self.u_max, self.v_max, Ts)
+            extra[need] = with_caps - without
         bind = (extra > 0) | (np.asarray(cap)[r] < self.v_max - tol.SPEED_BOUND_TOL)
         out[r] = np.where(bind, np.maximum(extra, 0) + self.slack_steps, 0)
         return out
