@@ -82,3 +82,18 @@ def test_curve_speed_holds_in_authority_mode():
     assert sim.records["v"].arrived_s is not None and sim.invariant_violations == 0
     assert in_curve > 50  # the bound did apply over the curve
     assert worst <= TOL
+
+
+def test_bad_limits_name_the_vehicle():
+    from bridge.cosim import Cosim, CosimSettings, VehicleSpec
+    from controllers.classes import builtin_classes
+
+    W = np.column_stack([np.arange(0.0, 30.0, 3.0), np.zeros(10)])
+    bad = np.full(10, 13.89)
+    bad[4] = -1.0
+    with pytest.raises(ValueError, match=r"vehicle v7: speed_limits: .*waypoint 4"):
+        Cosim(builtin_classes(), [VehicleSpec("v7", "car", W, speed_limits=bad)], CosimSettings())
+    with pytest.raises(ValueError, match=r"vehicle v8: speed_limits has 3 entries"):
+        Cosim(builtin_classes(), [VehicleSpec("v8", "car", W, speed_limits=np.ones(3))], CosimSettings())
+    with pytest.raises(ValueError, match="CosimSettings.speed"):
+        CosimSettings(speed=2.0)
