@@ -56,7 +56,8 @@ def run(controller: str, slow: float, zone=(200.0, 260.0), length=400.0, vclass=
         "travel_time_s": None if rec.arrived_s is None else round(rec.arrived_s - rec.admitted_s, 2),
         "free_flow_s": round(rec.free_flow_s, 2),
         "invariant_violations": sim.invariant_violations, "lane_limits": lane_limits,
-        "tube_escapes": int(getattr(sim.monitor, "tube_escapes", 0)), "constraint_violations": sim.constraint_violations,
+        "tube_escapes": int(getattr(sim.monitor, "tube_escapes", 0)),
+        "constraint_violations": sim.constraint_violations,
     }
 
 
