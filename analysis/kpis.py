@@ -17,9 +17,11 @@ Definitions (all times in simulated seconds):
 ``travel_time_s``
     arrival − admission.
 ``free_flow_s``
-    route length / the class's speed bound ``v_max`` (along the road for road-frame
-    classes, per axis for the paper's world-frame classes -- a diagonal route can then
-    be faster than "free flow" and its delay negative).
+    the route's time at ``min(v_max, lane limit under the front)`` (the record's
+    ``free_flow_s``, :func:`controllers.speed_limits.free_flow_time`), else route length /
+    the class's speed bound ``v_max`` (along the road for road-frame classes, per axis for the
+    paper's world-frame classes -- a diagonal route can then be faster than "free flow" and its
+    delay negative).
 ``delay_s``
     travel time − free-flow time.
 ``stop_episodes``, ``time_stopped_s``
@@ -30,6 +32,11 @@ Definitions (all times in simulated seconds):
     speed at most 0.1 m/s after a step, except at the last waypoint
     (:class:`analysis.halts.HaltCounter`); SUMO's ``waitingCount`` and ``waitingTime``
     for a baseline, so the two compare.  NaN when the run had no counter.
+``speed_limit_excess_max``
+    the largest ``speed - lane limit under the front bumper`` over the vehicle's run, at least
+    0 (m/s; a traffic-rule KPI, not a safety counter).  On a gap between two waypoints that
+    holds a lane change the lower of the two limits counts (the boundary lies somewhere in the
+    gap, at most delta long).  NaN for a vehicle that never drove and in a baseline's table.
 """
 
 from __future__ import annotations
@@ -47,7 +54,14 @@ __all__ = ["VEHICLE_COLUMNS", "STEP_COLUMNS", "vehicle_table", "step_table", "pe
 VEHICLE_COLUMNS = ("id", "vclass", "departure_s", "admitted_s", "admission_delay_s", "arrival_s",
                    "travel_time_s", "route_length_m", "free_flow_s", "delay_s", "sumo_time_loss_s", "denials",
                    "stop_episodes", "time_stopped_s", "halt_episodes", "time_halted_s", "mean_speed_mps",
-                   "closest_m")
+                   "closest_m", "speed_limit_excess_max")
+
+#: A vehicle counts in ``vehicles_over_limit`` when its speed exceeded its lane's limit by more than
+#: this (m/s): the excess the controller cannot prevent, for the urban classes (d̄ = 0.005 in
+#: position and velocity, ū = 3, a_c = 2.5, Ts = 0.1) at limits >= 3 m/s.  It bounds the NOMINAL
+#: next speed (the disturbance adds d̄) at the front position predicted one step on (off by up to
+#: d̄ + ū Ts^2 / 2, which the braking envelope turns into a_c (d̄ + ū Ts^2/2) / v_lim <= 0.017).
+SPEED_LIMIT_KPI_TOL = 0.025
 
 #: Columns of the per-step table every run has (others, e.g. ``min_separation_m``, are kept).
 STEP_COLUMNS = ("t_s", "active", "requests", "grants", "denials", "edges", "admitted", "tm_ms", "tm_decide_ms",
@@ -106,8 +120,10 @@ def vehicle_table(records, v_max: dict, Ts: float, tripinfo: pd.DataFrame | None
     for r in records:
         adm = np.nan if r.admitted_s is None else float(r.admitted_s)
         arr = np.nan if r.arrived_s is None else float(r.arrived_s)
-        free = float(r.route_length_m) / float(v_max[r.vclass])
+        ff = getattr(r, "free_flow_s", None)
+        free = float(ff) if ff is not None else float(r.route_length_m) / float(v_max[r.vclass])
         travel = arr - adm
+        exc = float(getattr(r, "speed_limit_excess", -np.inf))
         rows.append({
             "id": r.id, "vclass": r.vclass, "departure_s": float(r.depart_s), "admitted_s": adm,
             "admission_delay_s": adm - float(r.depart_s), "arrival_s": arr, "travel_time_s": travel,
@@ -118,6 +134,7 @@ def vehicle_table(records, v_max: dict, Ts: float, tripinfo: pd.DataFrame | None
             "time_halted_s": np.nan if halts is None else halts.steps.get(r.id, 0) * Ts,
             "mean_speed_mps": float(r.speed_sum) / r.steps if r.steps else np.nan,
             "closest_m": float(r.closest_m),
+            "speed_limit_excess_max": max(exc, 0.0) if np.isfinite(exc) else np.nan,
         })
     df = pd.DataFrame(rows, columns=list(VEHICLE_COLUMNS))
     if tripinfo is not None and len(tripinfo) and len(df):
@@ -159,7 +176,7 @@ def baseline_vehicle_table(tripinfo: pd.DataFrame, v_max: dict, class_of=None) -
         "sumo_time_loss_s": ti["time_loss_s"], "denials": np.nan, "stop_episodes": np.nan,
         "time_stopped_s": np.nan, "halt_episodes": ti["waiting_count"], "time_halted_s": ti["waiting_time_s"],
         "mean_speed_mps": ti["route_length_m"] / ti["duration_s"].where(ti["duration_s"] > 0),
-        "closest_m": np.nan,
+        "closest_m": np.nan, "speed_limit_excess_max": np.nan,
     }, columns=list(VEHICLE_COLUMNS))
     return df
 
@@ -217,8 +234,10 @@ def summarise(steps: pd.DataFrame, vehicles: pd.DataFrame, Ts: float) -> dict:
         (sum of per-step footprint overlaps), ``min_separation_m, stop_commands`` (denied
         requests), ``mean_travel_time_s, mean_delay_s, mean_admission_delay_s, stop_episodes,
         time_stopped_s, halt_episodes, time_halted_s`` (totals; halts None without a counter),
-        ``throughput_vph`` (arrivals per simulated hour).  Wall times are not figures of the
-        run (see :func:`timing_means`).
+        ``throughput_vph`` (arrivals per simulated hour), ``speed_limit_excess_max`` (m/s, the
+        largest over vehicles; None without one) and ``vehicles_over_limit`` (vehicles whose excess
+        is above ``SPEED_LIMIT_KPI_TOL``; traffic-rule figures, not safety counters).  Wall times
+        are not figures of the run (see :func:`timing_means`).
     """
     n = int(len(steps))
     arrived = vehicles["arrival_s"].notna() if len(vehicles) else pd.Series(dtype=bool)
@@ -249,6 +268,10 @@ def summarise(steps: pd.DataFrame, vehicles: pd.DataFrame, Ts: float) -> dict:
         if len(vehicles) and vehicles["time_halted_s"].notna().any() else None,
         "throughput_vph": round(float(arrived.sum()) * 3600.0 / sim_s, 3) if sim_s > 0 else None,
     }
+    exc = vehicles["speed_limit_excess_max"].dropna() if "speed_limit_excess_max" in vehicles \
+        else pd.Series(dtype=float)
+    out["speed_limit_excess_max"] = round(float(exc.max()), 6) if len(exc) else None
+    out["vehicles_over_limit"] = int((exc > SPEED_LIMIT_KPI_TOL).sum()) if len(exc) else None
     return out
 
 

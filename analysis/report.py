@@ -359,7 +359,7 @@ def report_path(a: RunData, b: RunData | None = None) -> Path:
 SUMMARY_ROWS = ("scenario", "baseline", "seed", "vehicles_arrived", "stop_reason", "simulated_s", "steps",
                 "collisions_sumo", "collisions_geometric", "invariant_violations", "constraint_violations",
                 "min_separation_m", "stop_commands", "mean_travel_time_s", "mean_delay_s", "throughput_vph",
-                "red_violations", "rtf", "wall_s", "error")
+                "speed_limit_excess_max", "vehicles_over_limit", "red_violations", "rtf", "wall_s", "error")
 
 
 def format_summary(summary: dict) -> str:

@@ -303,6 +303,11 @@ def build_parser() -> argparse.ArgumentParser:
                         "sets and cost with reach-tightened claims (design.md §7; car, bus, truck; single: a 600 m "
                         "straight; junction zones off)")
     r.add_argument("--tm", choices=["greedy", "optimal"], default=None, help="default: the scenario's")
+    r.add_argument("--speed-limits", choices=["obey", "ignore"], default="obey",
+                   help="obey (default): lanes' speed limits bound the vehicles' speed (with look-ahead); "
+                        "ignore: only the class bound (the KPI speed_limit_excess_max still measures them)")
+    r.add_argument("--lat-accel", type=float, default=None, metavar="A",
+                   help="authority mode: curve speed sqrt(A / curvature), A in m/s^2 (default 2.0; 0: off)")
     r.add_argument("--check", choices=["union", "timed"], default=None)
     r.add_argument("--switching", choices=["terminal", "early"], default=None)
     r.add_argument("--disturbance", choices=["random", "adversarial", "none"], default=None)

@@ -33,6 +33,7 @@ import numpy as np
 from controllers.classes import VehicleClass
 from controllers.plant import DISTURBANCES, step as plant_step
 from controllers.settings import ControllerSettings, SynthesisSettings
+from controllers.speed_limits import SpeedSettings, free_flow_time, route_speeds
 from controllers.stmpc import STMPC
 from bridge.groups import _Group, _headings
 from controllers.synthesis import synthesize
@@ -55,8 +56,9 @@ __all__ = ["CONTROLLERS", "Zone", "VehicleSpec", "CosimSettings", "World", "Free
 @dataclass(frozen=True)
 class VehicleSpec:
     """A vehicle to run: id, class name, waypoints (K, 2) at most delta apart, departure time;
-    optionally the speed limit (m/s) of the lane under each waypoint (``speed_limits``, (K,)),
-    for the controller to bound the vehicle's speed there."""
+    optionally the speed limit (m/s) of the lane under each waypoint (``speed_limits``, (K,)):
+    the controller keeps the vehicle at or below it (with look-ahead, see
+    :mod:`controllers.speed_limits` and :class:`CosimSettings.speed`)."""
 
     id: str
     vclass: str
@@ -86,8 +88,12 @@ class CosimSettings:
     #: ``paper``: the paper's sets, eq. (6) and centred claims; ``authority``: movement-authority
     #: sets and cost with reach-tightened claims (design.md §7; classes with ``comfort_decel``)
     controller: str = "paper"
+    #: lane limits and curve speeds as speed bounds (controllers.speed_limits)
+    speed: SpeedSettings = field(default_factory=SpeedSettings)
 
     def __post_init__(self) -> None:
+        if not isinstance(self.speed, SpeedSettings):
+            raise ValueError(f"CosimSettings.speed: must be a SpeedSettings, got {self.speed!r}")
         if self.controller not in CONTROLLERS:
             raise ValueError(f"CosimSettings.controller: must be one of {CONTROLLERS}, got {self.controller!r}")
         if not isinstance(self.signals, SignalSettings):
@@ -141,6 +147,10 @@ class VehicleRecord:
     closest_m: float = np.inf
     speed_sum: float = 0.0
     steps: int = 0
+    #: route time at the limits the front is under (lane limits, the class bound), s; None: length / v_max
+    free_flow_s: float | None = None
+    #: largest (speed - lane limit under the front) over the run (m/s); -inf until it drove
+    speed_limit_excess: float = -np.inf
 
 
 class Cosim:
@@ -211,13 +221,24 @@ class Cosim:
         #: claim models (authority mode): reach-tightened, time-indexed claims (tm.reach_book)
         self.reach = ReachBook(self.families, {c: (vc.length, vc.width) for c, vc in self.classes.items()}) \
             if self.authority else None
-        self.groups = {c: _Group(vc, STMPC(self.families[c], cs)) for c, vc in self.classes.items()}
+        sp = settings.speed
+        self.groups = {c: _Group(vc, STMPC(self.families[c], cs), decel=_look_ahead_decel(vc),
+                                 slack_steps=sp.slack_steps) for c, vc in self.classes.items()}
+        #: per-route speed tables (controllers.speed_limits), built on admission
+        self._lat_accel = sp.lat_accel if (self.authority and sp.curves) else None
+        for s_ in specs:
+            if s_.speed_limits is not None and len(np.asarray(s_.speed_limits)) != len(s_.waypoints):
+                raise ValueError(f"vehicle {s_.id}: speed_limits has {len(np.asarray(s_.speed_limits))} "
+                                 f"entries, one per waypoint ({len(s_.waypoints)}) is needed")
         self.tm = TrafficManager(settings.tm, {c: f.position_sets for c, f in self.families.items()},
                                  rotating=[c for c, vc in self.classes.items() if vc.model.frame == "road"])
         self.monitor = Monitor(settings.tm.check)
         self.pending = sorted(specs, key=lambda s: (s.depart_s, s.id))
         self._heading0: dict[str, float] = {}
         self.records = {s.id: VehicleRecord(s.id, s.vclass, s.depart_s, s.route_length_m) for s in specs}
+        self._speeds = {}
+        for s_ in specs:  # validated speed tables and free-flow times, before anything runs
+            self._route_speeds(s_)
         self.rng = np.random.default_rng(settings.seed)
         self.t = 0
         self.step_rows: list[dict] = []
@@ -236,6 +257,22 @@ class Cosim:
         # traffic lights (tm.signals): the vehicles' stop lines; link states read once per step
         self.signal_book = SignalBook(settings.signals)
         self._link_state: np.ndarray | None = None
+
+    def _route_speeds(self, spec: VehicleSpec):
+        """The speed tables of a spec's route (built once; its record's free-flow time set)."""
+        rs = self._speeds.get(spec.id)
+        if rs is None:
+            vc, sp = self.classes[spec.vclass], self.settings.speed
+            try:
+                rs = route_speeds(spec.waypoints, spec.speed_limits, vc.v_max, _look_ahead_decel(vc),
+                                  self._lat_accel, sp.curve_window_m, apply_lanes=sp.lane_limits)
+            except ValueError as exc:
+                raise ValueError(f"vehicle {spec.id}: {exc}") from None
+            self._speeds[spec.id] = rs
+            rec = self.records.get(spec.id)
+            if rec is not None:
+                rec.free_flow_s = free_flow_time(rs.arc, rs.lane, 0.5 * vc.length)
+        return rs
 
     # -------------------------------------------------------------- state
     def _fleet(self, with_requests: bool):
@@ -257,8 +294,17 @@ class Cosim:
                 nxt, nh, has = g.centres(1)
                 lp = g.ctl.index(g.X, nxt, nh)
                 self._ms_request += (time.perf_counter() - tr) * 1e3
+                Ts = self.settings.Ts
+                g.cap, _ = g.speed_caps(Ts)
+                # a binding speed bound asks for a grant with slack (SpeedSettings.slack_steps) and
+                # only for one whose tube lets the vehicle keep the bound (a stopped vehicle always asks)
+                inside = lp <= g.ctl.N
+                want = lp + g.slack(Ts, 1, g.cap)
+                may = has & g.ctl.may_request(g.X, cen, hd, lp, g.cap if self.authority else None)
+                may &= (want <= g.ctl.N) | (g.l == 0)
+                lp = np.where(inside, np.minimum(want, g.ctl.N), lp)
+                may &= g.ctl.cap_admits(g.X, nxt, nh, lp, g.cap) | (g.l == 0)
                 g.req_l = lp
-                may = has & g.ctl.may_request(g.X, cen, hd, lp)
                 if self.settings.switching == "terminal":
                     may &= g.l == 0
                 RQ.append(may)
@@ -472,16 +518,25 @@ class Cosim:
                 continue
             m = g.vclass.model
             cen, hd, _ = g.centres()
-            U = g.ctl.control(g.X, cen, g.l, ids=g.ids, heading=hd)
+            # the bounds of this step (computed with the requests: a switch moves the waypoint, not the
+            # vehicle, and the bounds depend on where the vehicle is)
+            U = g.ctl.control(g.X, cen, g.l, ids=g.ids, heading=hd, v_cap=g.cap)
             g.X, _ = plant_step(m, g.X, U, cen, s.disturbance, self.rng, heading=hd)
             l_new = g.ctl.index(g.X, cen, hd)
             bad = ~((l_new < g.l) | ((g.l == 0) & (l_new == 0)))
             self.invariant_violations += int(bad.sum())
+            # any index with x in T^l is a valid tube: where a speed bound binds keep the slack it
+            # needs (still at most l - 1: the index strictly decreases, claims stay monotone)
+            cap_next, lim = g.speed_caps(s.Ts)
+            keep = np.minimum(g.l - 1, l_new + g.slack(s.Ts, 0, cap_next))
+            l_new = np.where(g.l > 0, np.maximum(l_new, keep), l_new)
+            speed = np.linalg.norm(g.X[:, 2:4], axis=1)
+            np.maximum(g.excess, speed - lim, out=g.excess)
             z = g.ctl.error(g.X, cen, hd)[:, 2:]  # constraints hold in the model's frame
             self.constraint_violations += int(np.sum(np.any((z > m.z_bounds[1] + 1e-7) |
                                                             (z < m.z_bounds[0] - 1e-7), axis=1)))
             g.l = l_new
-            g.speed_sum += np.linalg.norm(g.X[:, 2:4], axis=1)
+            g.speed_sum += speed
             g.steps += 1
         ms_ctl = (time.perf_counter() - tc) * 1e3
         if self.authority and state is not None:  # 4a. x(t+1) inside S_1(t) (tube escapes counted)
@@ -592,7 +647,7 @@ class Cosim:
             W = np.asarray(sp.waypoints, dtype=float)
             x0 = g.vclass.model.equilibrium(W[0])
             H = _headings(W)
-            g.add(sp.id, W, H, x0, int(g.ctl.index(x0[None], W[:1], H[:1])[0]))
+            g.add(sp.id, W, H, x0, int(g.ctl.index(x0[None], W[:1], H[:1])[0]), self._route_speeds(sp))
             self.records[sp.id].admitted_s = t_s
             if sp.stop_lines is not None:
                 reach = self.junctions.classes[sp.vclass].hold + 0.5 * g.vclass.length
@@ -611,6 +666,7 @@ class Cosim:
             rec = self.records[g.ids[i]]
             rec.speed_sum += float(g.speed_sum[i])
             rec.steps += int(g.steps[i])
+            rec.speed_limit_excess = max(rec.speed_limit_excess, float(g.excess[i]))
             g.speed_sum[i] = 0.0
             g.steps[i] = 0
 
@@ -640,3 +696,9 @@ class Cosim:
                     progress(self)
         finally:
             self.flush_records()
+
+
+def _look_ahead_decel(vc: VehicleClass) -> float:
+    """Comfort deceleration of the speed look-ahead (m/s^2): the class's ``comfort_decel``, or half
+    its along-road input bound for classes without one (the paper's)."""
+    return float(vc.comfort_decel) if vc.comfort_decel is not None else 0.5 * float(vc.model.u_bounds[1][0])

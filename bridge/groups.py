@@ -4,18 +4,39 @@ from __future__ import annotations
 
 import numpy as np
 
+from controllers import tolerances as tol
 from controllers.classes import VehicleClass
+from controllers.speed_limits import RouteSpeeds, bound_at, plan_steps
 from controllers.stmpc import STMPC
 
 __all__ = ["_Group", "_headings"]
 
 
-class _Group:
-    """The active vehicles of one class, as arrays."""
+#: Columns of a group's waypoint buffer: x, y, heading, then the speed tables of
+#: :mod:`controllers.speed_limits` (arc shifted per route so that it increases over the buffer,
+#: gap bound, look-ahead speed, lane limit).
+_X, _Y, _H, _ARC, _BOUND, _ENV, _LANE = range(7)
+_COLS = 7
+#: Gap between the shifted arcs of two routes in a buffer (m): more than any look-ahead.
+_ROUTE_GAP_M = 1.0e4
 
-    def __init__(self, vclass: VehicleClass, ctl: STMPC):
+
+class _Group:
+    """The active vehicles of one class, as arrays.
+
+    ``slack_steps``: see :class:`controllers.speed_limits.SpeedSettings`; ``decel``: the
+    look-ahead's comfort deceleration (m/s^2)."""
+
+    def __init__(self, vclass: VehicleClass, ctl: STMPC, decel: float = 1.0, slack_steps: int = 3):
         self.vclass = vclass
         self.ctl = ctl
+        self.decel = float(decel)
+        self.slack_steps = int(slack_steps)
+        # the speed a bound must lie below to bind: the class bound, or the fastest speed any of
+        # its tubes allows if that is lower (the paper's sets: 6.56 m/s for the car)
+        self.v_max = min(float(vclass.model.z_bounds[1][0]), float(getattr(ctl, "v_top", np.inf)))
+        self.u_max = float(vclass.model.u_bounds[1][0])
+        self._arc_next = 0.0
         n = vclass.model.n
         self.ids: list[str] = []
         self.X = np.zeros((0, n))
@@ -25,7 +46,7 @@ class _Group:
         self.H: list[np.ndarray] = []
         # every route's waypoints and headings in one buffer, so that the current (or next)
         # waypoints of all vehicles are one gather: row start[i] + k[i] of vehicle i
-        self._wbuf = np.zeros((1024, 3))
+        self._wbuf = np.zeros((1024, _COLS))
         self._used = 0
         self.start = np.zeros(0, dtype=np.intp)
         self.K = np.zeros(0, dtype=np.intp)
@@ -34,23 +55,36 @@ class _Group:
         self.steps = np.zeros(0, dtype=np.intp)
         self.denied_last = np.zeros(0, dtype=bool)
         self.req_l = np.zeros(0, dtype=np.intp)  # request indices of the last TM state
+        self.cap = np.zeros(0)                   # this step's speed bounds (m/s), see speed_caps
+        self.excess = np.zeros(0)                # largest speed over the front's lane limit so far (m/s)
+        self.binds = np.zeros(0, dtype=bool)     # whether some speed bound of the route lies below v_max
 
-    def add(self, vid, W, H, x0, l0):
+    def add(self, vid, W, H, x0, l0, speeds: RouteSpeeds | None = None):
         K = len(W)
         live = int(self.K.sum())
         if self._used + K > len(self._wbuf):
             if self._used > 2 * live + 4096:  # mostly removed routes: compact
                 rows = np.concatenate([np.arange(s, s + k) for s, k in zip(self.start, self.K)]) \
                     if len(self.K) else np.zeros(0, dtype=np.intp)
-                self._wbuf = np.vstack([self._wbuf[rows], np.zeros((max(1024, 2 * (live + K)), 3))])
+                self._wbuf = np.vstack([self._wbuf[rows], np.zeros((max(1024, 2 * (live + K)), _COLS))])
                 self.start = np.concatenate([[0], np.cumsum(self.K)[:-1]]).astype(np.intp) \
                     if len(self.K) else self.start
                 self._used = live
             if self._used + K > len(self._wbuf):
                 grow = max(len(self._wbuf), K)
-                self._wbuf = np.vstack([self._wbuf, np.zeros((grow, 3))])
-        self._wbuf[self._used:self._used + K, :2] = W
-        self._wbuf[self._used:self._used + K, 2] = H
+                self._wbuf = np.vstack([self._wbuf, np.zeros((grow, _COLS))])
+        rows = slice(self._used, self._used + K)
+        self._wbuf[rows, :2] = W
+        self._wbuf[rows, _H] = H
+        if speeds is None:  # no limits: the class bound everywhere
+            arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(W, axis=0), axis=1))])
+            self._wbuf[rows, _BOUND] = self._wbuf[rows, _ENV] = self._wbuf[rows, _LANE] = self.v_max
+        else:
+            arc = speeds.arc
+            self._wbuf[rows, _BOUND], self._wbuf[rows, _ENV] = speeds.bound, speeds.env
+            self._wbuf[rows, _LANE] = speeds.lane
+        self._wbuf[rows, _ARC] = arc + self._arc_next  # increasing over the whole buffer
+        self._arc_next += float(arc[-1]) + _ROUTE_GAP_M
         self.ids.append(vid)
         self.X = np.vstack([self.X, x0[None]])
         self.k = np.append(self.k, 0)
@@ -64,6 +98,10 @@ class _Group:
         self.steps = np.append(self.steps, 0)
         self.denied_last = np.append(self.denied_last, False)
         self.req_l = np.append(self.req_l, 0)
+        self.cap = np.append(self.cap, self.v_max)
+        self.excess = np.append(self.excess, -np.inf)
+        self.binds = np.append(self.binds, speeds is not None and
+                               bool(np.min(speeds.bound) < self.v_max - tol.SPEED_BOUND_TOL))
 
     def remove(self, mask):
         keep = ~mask
@@ -74,6 +112,7 @@ class _Group:
         self.start, self.K = self.start[keep], self.K[keep]
         self.speed_sum, self.steps = self.speed_sum[keep], self.steps[keep]
         self.denied_last, self.req_l = self.denied_last[keep], self.req_l[keep]
+        self.cap, self.excess, self.binds = self.cap[keep], self.excess[keep], self.binds[keep]
 
     @property
     def at_last(self) -> np.ndarray:
@@ -85,7 +124,60 @@ class _Group:
         if not self.ids:
             return np.zeros((0, 2)), np.zeros(0), np.zeros(0, dtype=bool)
         row = self._wbuf[self.start + np.minimum(self.k + offset, self.K - 1)]
-        return row[:, :2], row[:, 2], self.k + offset < self.K
+        return row[:, :2], row[:, _H], self.k + offset < self.K
+
+    # ------------------------------------------------------------------ speed bounds
+    def _along(self, X=None):
+        """Centre arc (buffer-shifted) and along-road speed of every vehicle: the current
+        waypoint's arc less the lead to it along its segment."""
+        X = self.X if X is None else X
+        row = self._wbuf[self.start + self.k]
+        d = np.column_stack([np.cos(row[:, _H]), np.sin(row[:, _H])])
+        lead = np.einsum("ij,ij->i", row[:, :2] - X[:, :2], d)
+        return row[:, _ARC] - lead, np.einsum("ij,ij->i", X[:, 2:4], d)
+
+    def _tables(self):
+        b = self._wbuf[:self._used]
+        return b[:, _ARC], b[:, _BOUND], b[:, _ENV], b[:, _LANE]
+
+    def speed_caps(self, Ts: float, X=None) -> tuple[np.ndarray, np.ndarray]:
+        """The speed bound with look-ahead at each front one step on (front + v Ts: where the front
+        is when the next input's speed holds), and the lane limit under the front now."""
+        s, v = self._along(X)
+        arc, bound, env, lane = self._tables()
+        first, last = self.start, self.start + self.K - 1
+        front = s + 0.5 * self.vclass.length
+        cap, _ = bound_at(arc, bound, env, lane, first, last, front + np.maximum(v, 0.0) * Ts, self.decel)
+        _, lim = bound_at(arc, bound, env, lane, first, last, front, self.decel)
+        return cap, lim
+
+    def slack(self, Ts: float, offset: int, cap: np.ndarray, X=None) -> np.ndarray:
+        """Extra tube levels (steps) each vehicle needs to come to rest at waypoint ``k + offset``
+        keeping its speed bounds, over what it needs without them (plus ``slack_steps``);
+        0 where no bound binds.  See :class:`controllers.speed_limits.SpeedSettings`."""
+        out = np.zeros(len(self.ids), dtype=np.intp)
+        r = np.flatnonzero(self.binds)  # routes without a bound below v_max need no slack
+        if not len(r):
+            return out
+        s, v = self._along(X)
+        s, v = s[r], v[r]
+        arc, bound, env, lane = self._tables()
+        first, last = self.start[r], self.start[r] + self.K[r] - 1
+        stop = arc[first + np.minimum(self.k[r] + offset, self.K[r] - 1)]
+        half = 0.5 * self.vclass.length
+        extra = np.zeros(len(r), dtype=np.intp)
+        # A bound b at S (front arc) slows the plan only if b^2 + 2 a_c S < 2 a_c (stop + L/2): the
+        # braking to the stop is slower there otherwise.  Then the look-ahead bound at the front
+        # now lies below the braking speed to the stop now, so the plans are needed only there.
+        now, _ = bound_at(arc, bound, env, lane, first, last, s + half, self.decel)
+        need = np.flatnonzero(now ** 2 < 2.0 * self.decel * np.maximum(stop - s, 0.0) + tol.SPEED_BOUND_TOL)
+        if len(need):
+            with_caps, without = plan_steps(s[need], v[need], stop[need], arc, bound, env, lane, first[need],
+                                            last[need], half, self.decel, self.u_max, self.v_max, Ts)
+            extra[need] = with_caps - without
+        bind = (extra > 0) | (np.asarray(cap)[r] < self.v_max - tol.SPEED_BOUND_TOL)
+        out[r] = np.where(bind, np.maximum(extra, 0) + self.slack_steps, 0)
+        return out
 
 
 def _headings(W: np.ndarray) -> np.ndarray:

@@ -96,6 +96,7 @@ def run_multi(name: str, out: Path, opts, world=None, specs=None) -> dict:
     from analysis.halts import HaltCounter
     from analysis.mcap_log import observers_for
     from analysis.outputs import StreamingOutputs, close_observers, write_run_tables
+    from controllers.speed_limits import SpeedSettings
     from bridge.cosim import Cosim, CosimSettings
     from bridge.cosim import VehicleSpec
     from bridge.layouts import crossing, paper10, subsample, swap
@@ -135,7 +136,8 @@ def run_multi(name: str, out: Path, opts, world=None, specs=None) -> dict:
         settings = CosimSettings(tm=TMSettings(policy=opts.tm, check=opts.check, seed=opts.seed),
                                  switching=opts.switching, disturbance=opts.disturbance, solver=opts.solver,
                                  seed=opts.seed, duration_s=opts.duration,
-                                 controller=getattr(opts, "controller", "paper"))
+                                 controller=getattr(opts, "controller", "paper"),
+                                 speed=SpeedSettings.from_options(opts))
         observers = [HaltCounter()] + observers_for(out, getattr(opts, "log", None) or "none",
                                                     {"scenario": name, "seed": opts.seed, **options})
         observers.append(StreamingOutputs(out, dict(summary)))  # last: the row is complete by then

@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from controllers.speed_limits import SpeedSettings
 from bridge.cosim import Cosim, CosimSettings, VehicleSpec, Zone
 from bridge.pose import front_bumper, sumo_angle
 from analysis.kpis import baseline_vehicle_table, read_tripinfo
@@ -272,7 +273,10 @@ def run_sumo(target: str, out: Path, opts) -> dict:
         summary.update(seed=seed, begin_s=begin,
                        options=dict(tm=tm, check=check, switching=switching, disturbance=disturbance,
                                     solver=opts.solver, duration_s=opts.duration, signals=signals.mode,
-                                    controller=getattr(opts, "controller", "paper")))
+                                    controller=getattr(opts, "controller", "paper"),
+                                    speed_limits=getattr(opts, "speed_limits", None) or "obey",
+                                    lat_accel=SpeedSettings.from_options(opts).lat_accel
+                                    if SpeedSettings.from_options(opts).curves else 0.0))
         _write_summary(out, summary)
         tripinfo = out / "tripinfo.xml"
         inputs = None
@@ -337,7 +341,8 @@ def run_sumo(target: str, out: Path, opts) -> dict:
         world = SumoWorld(adapter, {pv.id: pv for pv in demand.vehicles if pv.id in routes}, routes, slots=slots)
         settings = CosimSettings(tm=TMSettings(policy=tm, check=check, seed=seed), switching=switching,
                                  disturbance=disturbance, solver=opts.solver, seed=seed, duration_s=duration,
-                                 signals=signals, controller=getattr(opts, "controller", "paper"))
+                                 signals=signals, controller=getattr(opts, "controller", "paper"),
+                                 speed=SpeedSettings.from_options(opts))
         observers = [HaltCounter()] + observers_for(out, getattr(opts, "log", None) or "none",
                                                     {"scenario": str(target), "seed": seed, **summary["options"]})
         observers.append(StreamingOutputs(out, dict(summary)))  # last: the row is complete by then

@@ -185,6 +185,15 @@ class STMPC:
         self._along = next(k for k, t in enumerate(self._tables) if 0 in t.states)
         st = list(self._tables[self._along].states)
         self._along_v = st.index(2) if 2 in st else None
+        # the fastest along-road speed any tube allows (T^N is the largest set): a speed bound at or
+        # above it can never bind
+        f = family.factors[self._along]
+        if self._along_v is None:
+            self.v_top = float("inf")
+        else:
+            e = np.zeros(len(st))
+            e[self._along_v] = 1.0
+            self.v_top = float(f.levels[self.N].support(e[None])[0])
 
     # ------------------------------------------------------------------ On-1
     def error(self, X: np.ndarray, centres: np.ndarray, heading=None) -> np.ndarray:
@@ -304,8 +313,17 @@ class STMPC:
         """Inputs (world frame) for states ``X`` at indices ``l`` w.r.t. waypoints ``centres``.
 
         In ``authority`` mode the along-road factor's cost is ``(v+ - v_des)^2`` (see
-        :meth:`desired_speed`; ``v_cap`` per-row extra speed limits); every other factor, and
-        every constraint, is that of eq. (6).
+        :meth:`desired_speed`); every other factor's cost is that of eq. (6).
+
+        ``v_cap`` (per row, m/s; lane limits and curve speeds with their look-ahead, see
+        :mod:`controllers.speed_limits`) is, in both modes, a traffic rule on top of the tube:
+        the bound ``|v+| <= v_cap`` on the nominal next along-road speed ``v+ = (A e + B u)_v``,
+        intersected with the tube's feasible inputs ``{u in U : A x + B u in T~^{l-1}(r)}``.
+        The tube constraint is never relaxed: when the intersection is empty **the tube wins**
+        and the input is the tube-feasible one nearest the speed bound (its end of the tube's
+        interval), so a cap can never make the QP infeasible.  Road-frame models only (a
+        world-frame class has no along-road input); at ``l = 0`` the terminal law applies
+        unchanged (``T^0`` is a zero-velocity set).
 
         Raises
         ------
@@ -325,18 +343,22 @@ class STMPC:
         qp = np.nonzero(l > 0)[0]
         if qp.size:
             solver = self.settings.solver
-            vdes = None
+            vdes = cap = None
+            if v_cap is not None and self.model.frame == "road" and self._along_v is not None:
+                cap = np.maximum(np.broadcast_to(np.asarray(v_cap, dtype=float), (len(l),))[qp], 0.0)
             if self.settings.mode == "authority":
-                vdes = self.desired_speed(E[qp], None if v_cap is None else np.asarray(v_cap, dtype=float)[qp])
+                vdes = self.desired_speed(E[qp], cap if cap is not None else
+                                          None if v_cap is None else np.asarray(v_cap, dtype=float)[qp])
             if solver == "exact" and all(len(t.inputs) == 1 for t in self._tables):
-                U[qp] = self._solve_exact(E[qp], l[qp], qp, ids, vdes)
+                U[qp] = self._solve_exact(E[qp], l[qp], qp, ids, vdes, cap)
             else:
                 U[qp] = self._solve_generic(E[qp], l[qp], qp, ids, "daqp" if solver == "exact" else solver,
-                                            vdes)
+                                            vdes, cap)
         return self._to_world(U, heading)
 
-    def _solve_exact(self, E, l, rows, ids, vdes=None):
-        """Closed form per single-input factor, every vehicle at once (levels gathered)."""
+    def _solve_exact(self, E, l, rows, ids, vdes=None, cap=None):
+        """Closed form per single-input factor, every vehicle at once (levels gathered); ``cap``:
+        the speed bound on the along factor (see :meth:`control`; the tube wins)."""
         U = np.empty((E.shape[0], self.model.m))
         ulo, uhi = self.model.u_bounds
         lev = l - 1
@@ -349,29 +371,69 @@ class STMPC:
                 u_free = (vdes - Ef @ t.A[j]) / b[j]
             else:
                 u_free = -((Ef @ t.A.T) @ b) / (b @ b)
-            g = t.gp[lev]                                   # (V, Ft)
-            beta = t.htp[lev].copy()                        # h~ - H~ A e
-            for j in range(len(t.states)):
-                beta -= t.HtAp[j][lev] * Ef[:, j, None]
-            pos, neg = g > tol.FACET_MERGE_TOL, g < -tol.FACET_MERGE_TOL
-            zero = ~(pos | neg)
-            safe = np.where(zero, 1.0, g)
-            ratio = beta / safe
-            hi = np.minimum(uhi[k], np.where(pos, ratio, np.inf).min(axis=1))
-            lo = np.maximum(ulo[k], np.where(neg, ratio, -np.inf).max(axis=1))
-            bad = (zero & (beta < -tol.QP_FEAS_TOL)).any(axis=1) | (lo > hi + tol.QP_FEAS_TOL)
+            lo, hi, bad = self._interval(t, Ef, lev, ulo[k], uhi[k])
             if bad.any():
                 r = rows[np.nonzero(bad)[0]]
                 raise InfeasibleQPError(
                     f"{self.model.name}: QP (6) infeasible for vehicle(s) {_names(r, ids)} inside the "
                     f"domain of attraction (factor states {t.states.tolist()})", r)
             mid = np.where(lo > hi, 0.5 * (lo + hi), u_free)
-            U[:, k] = np.clip(mid, np.minimum(lo, hi), np.maximum(lo, hi))
+            lo, hi = np.minimum(lo, hi), np.maximum(lo, hi)
+            if cap is not None and ti == self._along:
+                lo, hi = _cap_interval(lo, hi, Ef @ t.A[self._along_v], b[self._along_v], cap)
+            U[:, k] = np.clip(mid, lo, hi)
         return U
 
-    def _qp_data(self, e, lev, vdes=None):
+    @staticmethod
+    def _interval(t, Ef, lev, ulo, uhi):
+        """The inputs ``[lo, hi]`` of a single-input factor with ``A e + b u in T~^{lev}`` and
+        ``u in U``, per row, and whether that is empty (beyond ``QP_FEAS_TOL``)."""
+        g = t.gp[lev]                                   # (V, Ft)
+        beta = t.htp[lev].copy()                        # h~ - H~ A e
+        for j in range(len(t.states)):
+            beta -= t.HtAp[j][lev] * Ef[:, j, None]
+        pos, neg = g > tol.FACET_MERGE_TOL, g < -tol.FACET_MERGE_TOL
+        zero = ~(pos | neg)
+        safe = np.where(zero, 1.0, g)
+        ratio = beta / safe
+        hi = np.minimum(uhi, np.where(pos, ratio, np.inf).min(axis=1))
+        lo = np.maximum(ulo, np.where(neg, ratio, -np.inf).max(axis=1))
+        bad = (zero & (beta < -tol.QP_FEAS_TOL)).any(axis=1) | (lo > hi + tol.QP_FEAS_TOL)
+        return lo, hi, bad
+
+    def cap_admits(self, X: np.ndarray, centres: np.ndarray, heading, l: np.ndarray, v_cap) -> np.ndarray:
+        """Whether the tube of index ``l`` around ``centres`` lets each vehicle keep its next
+        along-road speed within ``v_cap`` (some tube-feasible input gives ``|v+| <= v_cap``).
+
+        The request rule asks this of the waypoint it would switch to: a grant whose tube forces the
+        vehicle above its speed bound (the tube wins over a cap, :meth:`control`) is not asked for.
+        True where ``l = 0`` (the terminal law, a zero-velocity set), ``l > N`` (outside: the
+        request is refused anyway), for world-frame models and for multi-input factors."""
+        l = np.asarray(l, dtype=np.intp)
+        ok = np.ones(len(l), dtype=bool)
+        t = self._tables[self._along]
+        if v_cap is None or self.model.frame != "road" or self._along_v is None or len(t.inputs) != 1:
+            return ok
+        rows = np.flatnonzero((l >= 1) & (l <= self.N))
+        if not len(rows):
+            return ok
+        E = self.error(np.asarray(X, dtype=float)[rows], np.asarray(centres)[rows],
+                       None if heading is None else np.asarray(heading)[rows])
+        Ef = E[:, t.states]
+        k = int(t.inputs[0])
+        ulo, uhi = self.model.u_bounds
+        lo, hi, bad = self._interval(t, Ef, l[rows] - 1, ulo[k], uhi[k])
+        lo, hi = np.minimum(lo, hi), np.maximum(lo, hi)
+        cap = np.maximum(np.broadcast_to(np.asarray(v_cap, dtype=float), (len(l),))[rows], 0.0)
+        j = self._along_v
+        base, b = Ef @ t.A[j], t.B[j, 0]
+        vlo, vhi = np.minimum(base + b * lo, base + b * hi), np.maximum(base + b * lo, base + b * hi)
+        ok[rows] = ~bad & (vlo <= cap + tol.QP_FEAS_TOL) & (vhi >= -cap - tol.QP_FEAS_TOL)
+        return ok
+
+    def _qp_data(self, e, lev, vdes=None, cap=None):
         """Dense QP data of eq. (6) on all inputs: 0.5 u'Hu + f'u, G u <= g (``vdes``: the
-        movement-authority cost on the along factor instead)."""
+        movement-authority cost on the along factor instead; ``cap``: rows ``|v+| <= cap``)."""
         m = self.model.m
         Hq = np.zeros((m, m))
         f = np.zeros(m)
@@ -389,17 +451,29 @@ class STMPC:
             G[:, t.inputs] = t.HtB[lev - 1]
             G_rows.append(G)
             g_rows.append(t.ht[lev - 1] - t.HtA[lev - 1] @ ef)
+            if cap is not None and ti == self._along:
+                j = self._along_v
+                Gc = np.zeros((2, m))
+                Gc[:, t.inputs] = np.array([t.B[j], -t.B[j]])
+                base = float(t.A[j] @ ef)
+                G_rows.append(Gc)
+                g_rows.append(np.array([cap - base, cap + base]))
         return Hq, f, np.vstack(G_rows), np.concatenate(g_rows)
 
-    def _solve_generic(self, E, l, rows, ids, solver, vdes=None):
+    def _solve_generic(self, E, l, rows, ids, solver, vdes=None, cap=None):
         U = np.empty((E.shape[0], self.model.m))
         ulo, uhi = self.model.u_bounds
         for i in range(E.shape[0]):
-            Hq, f, G, g = self._qp_data(E[i], int(l[i]), None if vdes is None else float(vdes[i]))
-            if solver == "daqp":
-                u, ok = _solve_daqp(Hq, f, G, g, ulo, uhi)
-            else:
-                u, ok = self._solve_proxsuite(Hq, f, G, g, ulo, uhi, int(l[i]))
+            vd = None if vdes is None else float(vdes[i])
+            ci = None if cap is None else float(cap[i])
+            Hq, f, G, g = self._qp_data(E[i], int(l[i]), vd, ci)
+            u, ok = self._solve_one(solver, Hq, f, G, g, ulo, uhi, int(l[i]))
+            if ci is not None and not ok:
+                # the speed bound misses the tube: the tube wins.  The tube's v+ then lies wholly
+                # above cap or wholly below -cap; either way min (v+ - cap)^2 over the tube is its
+                # end nearest [-cap, cap], the input _solve_exact takes.
+                Hq, f, G, g = self._qp_data(E[i], int(l[i]), ci)
+                u, ok = self._solve_one(solver, Hq, f, G, g, ulo, uhi, int(l[i]))
             if not ok or np.any(G @ u > g + tol.QP_FEAS_TOL * 10) or np.any(u < ulo - 1e-6) \
                     or np.any(u > uhi + 1e-6):
                 r = rows[[i]]
@@ -408,6 +482,11 @@ class STMPC:
                     f"the domain of attraction", r)
             U[i] = np.clip(u, ulo, uhi)
         return U
+
+    def _solve_one(self, solver, Hq, f, G, g, ulo, uhi, lev):
+        if solver == "daqp":
+            return _solve_daqp(Hq, f, G, g, ulo, uhi)
+        return self._solve_proxsuite(Hq, f, G, g, ulo, uhi, lev)
 
     def _solve_proxsuite(self, Hq, f, G, g, ulo, uhi, lev):
         import proxsuite
@@ -428,6 +507,20 @@ class STMPC:
         status = qp.results.info.status
         ok = status == proxsuite.proxqp.QPSolverOutput.PROXQP_SOLVED
         return np.array(qp.results.x), ok
+
+
+def _cap_interval(lo, hi, base, b, cap):
+    """``[lo, hi]`` (a factor's tube-feasible inputs) intersected with ``|base + b u| <= cap``
+    row-wise; where they do not meet, the end of ``[lo, hi]`` nearest the cap's interval (the
+    tube wins)."""
+    if abs(b) <= tol.FACET_MERGE_TOL:  # the input does not move v+ in one step: nothing to bound
+        return lo, hi
+    c1, c2 = (cap - base) / b, (-cap - base) / b
+    clo, chi = np.minimum(c1, c2), np.maximum(c1, c2)
+    nlo, nhi = np.maximum(lo, clo), np.minimum(hi, chi)
+    meet = nlo <= nhi
+    near = np.where(chi < lo, lo, hi)  # empty: the cap lies wholly below or wholly above [lo, hi]
+    return np.where(meet, nlo, near), np.where(meet, nhi, near)
 
 
 def _solve_daqp(Hq, f, G, g, ulo, uhi):

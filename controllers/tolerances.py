@@ -70,3 +70,8 @@ VERIFY_TOL = 1e-7
 #: lowered by this after computing them from the polygon's vertices (the edge interpolation
 #: at v = w rounds at ~1e-14 relative on values <= ~200 m).
 AUTHORITY_TABLE_TOL = 1e-6
+
+#: A speed bound (lane limit, curve speed; m/s) counts as binding when it lies this far below
+#: the class's speed bound; the tube index then keeps the slack the bound needs
+#: (:meth:`bridge.groups._Group.slack`).
+SPEED_BOUND_TOL = 1e-6

@@ -79,7 +79,8 @@ def test_speed_cap_is_tracked(fams, cap):
     where the car settles: median within 0.05 m/s (the disturbance moves v by <= 0.005 a step;
     measured 0.001-0.002).  Known limit: below ~11 m/s the tube, which must shrink one level a
     step and whose levels are minimum-time sets for v̄, pushes the car above the cap (3 -> 6.0,
-    8 -> 8.5 m/s measured); honouring low caps needs sets built for them."""
+    8 -> 8.5 m/s measured) when the index is re-minimised every step, as here; the co-simulation
+    loop keeps tube slack where a bound binds (tests/bridge/test_cosim_speed_limits.py)."""
     speeds, bad, _, _ = drive(fams["car"], "random", seed=2, v_cap=np.array([cap]))
     assert bad == 0
     assert abs(np.median(speeds[(drive.pos > 150) & (drive.pos < 500)]) - cap) < 0.05
