@@ -156,8 +156,7 @@ class JunctionGate:
     def __init__(self, zones, classes: dict):
         self.zones = list(zones)
         self.classes = dict(classes)
-        radius = max(c.top + 0.5 * np.hypot(c.length, c.width) for c in self.classes.values()) \
-            if self.classes else 0.0
+        radius = self.guard_radius(self.classes.values())
         self.lo = np.array([z.lo for z in self.zones], dtype=float).reshape(-1, 2) - radius
         self.hi = np.array([z.hi for z in self.zones], dtype=float).reshape(-1, 2) + radius
         self.guards = GuardIndex(self.lo, self.hi)
@@ -172,6 +171,12 @@ class JunctionGate:
         self.given_back: dict[str, set[int]] = {}
         #: vehicles standing at a red light this step (:meth:`give_back`)
         self.standing: set[str] = set()
+
+    @staticmethod
+    def guard_radius(classes) -> float:
+        """How far the guard reaches beyond the zone (m): the largest claim radius of any class
+        (``max |P^N|`` plus half the footprint diagonal; centred claims reach backwards too)."""
+        return max((c.top + 0.5 * np.hypot(c.length, c.width) for c in classes), default=0.0)
 
     def give_back(self, ids) -> None:
         """The vehicles ``ids`` stand at a red light this step (replaces the last call's set):
@@ -220,6 +225,22 @@ class JunctionGate:
         r = np.flatnonzero(req)
         if not len(r):
             return req
+        wz, wrow = self._wanting(fleet, r, new_lo, new_hi)
+        allowed = self._hand_out(t, fleet, pos, wz, wrow)
+        req[wrow[~allowed]] = False   # only a zone's holders may ask into its guard
+        wait = self.wait
+        for key in [k for k in wait if k[1] not in pos or k[1] in self.holders[k[0]]]:
+            wait.pop(key, None)
+        for vid in [v for v, zs in self.given_back.items() if v not in pos or not zs]:
+            del self.given_back[vid]
+        return req
+
+    def _wanting(self, fleet: JunctionFleet, r: np.ndarray, new_lo: np.ndarray,
+                 new_hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(zone, row)`` pairs of requesters ``r`` that need the zone's token unless they hold it,
+        grouped by zone, rows ascending: the new claim reaches a guard the current claim is not
+        in, or a guard whose token the vehicle gave back (:meth:`give_back`)."""
+        cur_lo, cur_hi, ids = fleet.claim_lo, fleet.claim_hi, fleet.ids
         # (requester, zone) pairs whose new claim reaches a guard its current claim is not in
         ni, nz = self.guards.pairs(new_lo, new_hi)
         ci, cz = self.guards.pairs(cur_lo[r], cur_hi[r])
@@ -231,6 +252,14 @@ class JunctionGate:
             fresh |= again
         want = np.sort(nz[fresh] * len(r) + ni[fresh])             # grouped by zone, rows ascending
         wz, wrow = want // len(r), r[want % len(r)]
+        return wz, wrow
+
+    def _hand_out(self, t: int, fleet: JunctionFleet, pos: dict, wz: np.ndarray,
+                  wrow: np.ndarray) -> np.ndarray:
+        """Hand out tokens to the pairs ``(wz, wrow)`` (from :meth:`_wanting`) that wait for one;
+        returns which pairs may ask (holders, and the vehicles given a token now)."""
+        cur_lo, cur_hi, ids = fleet.claim_lo, fleet.claim_hi, fleet.ids
+        n = len(ids)
         if len(self._routes) > 100_000:  # stale (vehicle, waypoint) keys: start over
             self._routes.clear()
         wait = self.wait
@@ -299,12 +328,7 @@ class JunctionGate:
                 allowed[P[q]] = True
                 if cid[q] in self.given_back:
                     self.given_back[cid[q]].discard(z)
-        req[wrow[~allowed]] = False   # only a zone's holders may ask into its guard
-        for key in [k for k in wait if k[1] not in pos or k[1] in self.holders[k[0]]]:
-            wait.pop(key, None)
-        for vid in [v for v, zs in self.given_back.items() if v not in pos or not zs]:
-            del self.given_back[vid]
-        return req
+        return allowed
 
     def _release(self, pos: dict, cur_lo: np.ndarray, cur_hi: np.ndarray) -> None:
         """Release tokens whose holder's current claim has left the guard (or who is gone)."""

@@ -1,0 +1,216 @@
+"""The junction liveness layer for movement-authority vehicles (design.md §7, "Liveness with the
+new claims").
+
+In ``--controller authority`` mode a vehicle's current waypoint ``c`` is its stop point (its
+movement authority) and its claims ``S_k`` are reach-tightened: they run from where the vehicle is
+to a little past ``c`` and no longer reach backwards as the paper's centred sets do.  The tokens,
+waiting order, corridors and exit-slot room of :class:`tm.junctions.JunctionGate` stay; what
+changes is where they apply:
+
+* **guard**: the zone enlarged by the claims' across half-width (``max |y|`` over the across
+  factor's levels) plus half the footprint's diagonal (:meth:`AuthorityGate.guard_radius`);
+* **entry line**: without the zone's token a vehicle may not move its stop point to a waypoint
+  whose hold box ``T^0 ⊕ footprint`` meets the guard -- its stop point stays behind the guard's
+  edge less the ``T^0`` extent and ``L/2`` (:meth:`AuthorityGate.intervals`);
+* **exit slot**: the first waypoint after the entry whose hold box misses the guard again.  With
+  the token the stop point may move up to it (and on, outside the guard, without one); the token
+  is handed out only with room there for the stopped vehicle: no other vehicle's claim on the
+  slot's hold box;
+* **corridor**: the union of the claims the vehicle can make while its stop point moves from
+  where it is to the exit slot: boxes around those waypoints, ``δ/2 + T^0`` along plus ``L/2``
+  (a position lies within ``δ/2`` of a waypoint), the across half-width plus ``W/2`` across;
+* **release**: when every ``S_k`` (the bounding box of their union) has left the guard.
+
+Pure numpy, no simulator; safety stays with the traffic manager, which checks every request.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from controllers.authority import AuthorityTables
+from tm.junctions import JunctionFleet, JunctionGate
+
+__all__ = ["AuthorityReach", "AuthorityGate"]
+
+
+def _world_half(a: float, b: float, *headings: np.ndarray) -> np.ndarray:
+    """Half extents (n, 2) of the world bounding box of a segment-frame box ``±a`` along, ``±b``
+    across, hulled over the given headings (a waypoint's arriving and leaving segments)."""
+    out = None
+    for h in headings:
+        c, s = np.abs(np.cos(h))[:, None], np.abs(np.sin(h))[:, None]
+        e = np.hstack([c * a + s * b, s * a + c * b])
+        out = e if out is None else np.maximum(out, e)
+    return out
+
+
+@dataclass(frozen=True, eq=False)
+class AuthorityReach:
+    """What the junction layer needs of a movement-authority class (metres).
+
+    Parameters
+    ----------
+    hold, hold_y : float
+        Half extents of ``T^0``'s position along and across the road (the vehicle at rest at its
+        stop point lies in ``T^0``).
+    across : float
+        The claims' across half-width: ``max |y|`` over every level's across range (a claim lies
+        inside ``T^m``, so inside it).
+    length, width : float
+        Footprint.
+    delta : float
+        Largest gap between consecutive waypoints.
+    """
+
+    hold: float
+    hold_y: float
+    across: float
+    length: float
+    width: float
+    delta: float
+
+    def __post_init__(self) -> None:
+        vals = dict(hold=self.hold, hold_y=self.hold_y, across=self.across, length=self.length,
+                    width=self.width, delta=self.delta)
+        bad = {k: v for k, v in vals.items() if not (np.isfinite(v) and v >= 0)}
+        if bad or not (self.length > 0 and self.width > 0 and self.delta > 0):
+            raise ValueError(f"AuthorityReach: extents must be finite and >= 0 m, length, width and delta > 0; "
+                             f"got {vals}")
+
+    @staticmethod
+    def of(tables: AuthorityTables, length: float, width: float, delta: float) -> AuthorityReach:
+        """From a movement-authority family's tables (:func:`controllers.authority.build_tables`)."""
+        return AuthorityReach(hold=float(max(-tables.p_lo[0], tables.p_hi[0])),
+                              hold_y=float(max(-tables.y_lo[0], tables.y_hi[0])),
+                              across=float(max(-tables.y_lo.min(), tables.y_hi.max())),
+                              length=float(length), width=float(width), delta=float(delta))
+
+    @property
+    def guard_reach(self) -> float:
+        """How far this class's claims stick out of a zone its route crosses: the across
+        half-width plus half the footprint's diagonal (the body turns inside the junction)."""
+        return self.across + 0.5 * float(np.hypot(self.length, self.width))
+
+    def hold_half(self, *headings: np.ndarray) -> np.ndarray:
+        """World half extents (n, 2) of the hold box ``T^0 ⊕ footprint`` at the headings."""
+        return _world_half(self.hold + 0.5 * self.length, self.hold_y + 0.5 * self.width, *headings)
+
+    def half_extent(self, *headings: np.ndarray) -> np.ndarray:
+        """World half extents (n, 2) of a corridor box around a waypoint at the headings: every
+        claim position within ``δ/2`` of it (plus ``T^0`` along), the across half-width, the footprint."""
+        return _world_half(0.5 * self.delta + self.hold + 0.5 * self.length, self.across + 0.5 * self.width,
+                           *headings)
+
+
+class AuthorityGate(JunctionGate):
+    """:class:`tm.junctions.JunctionGate` with the movement-authority rules (module notes).
+
+    Parameters
+    ----------
+    zones : list of Zone
+    classes : mapping of str to AuthorityReach
+        Every class a fleet row may name.
+
+    The fleet's ``claim_lo``, ``claim_hi`` are the world bounding boxes of every vehicle's
+    ``∪_k S_k`` (:func:`tm.reach.world_aabb`); :meth:`withhold` ignores the new claims' boxes
+    (the rules are on the stop points).
+    """
+
+    def __init__(self, zones, classes: dict):
+        super().__init__(zones, classes)
+        #: vehicle id -> its route's intervals through the guards (:meth:`intervals`)
+        self._spans: dict[str, tuple] = {}
+
+    @staticmethod
+    def guard_radius(classes) -> float:
+        """The largest :attr:`AuthorityReach.guard_reach` of the classes (m)."""
+        return max((c.guard_reach for c in classes), default=0.0)
+
+    def intervals(self, fleet: JunctionFleet, row: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """``(zone, entry, exit, exits)``: the runs of waypoints of row ``row``'s route whose hold
+        box (``T^0 ⊕ footprint`` at the arriving and leaving headings) meets a zone's guard.
+
+        ``entry`` is the first waypoint of a run (the stop point may move there only with the
+        zone's token), ``exit`` the first after it whose hold box misses the guard (the exit
+        slot), or the last waypoint when the route ends inside the guard (``exits`` False).
+        Cached per vehicle: they depend on its route only."""
+        vid = fleet.ids[row]
+        found = self._spans.get(vid)
+        if found is not None:
+            return found
+        W, H, _ = fleet.route(row)
+        half = self.classes[fleet.family[row]].hold_half(H, np.r_[H[1:], H[-1:]])
+        i, z = self.guards.pairs(W - half, W + half)
+        o = np.lexsort((i, z))
+        i, z = i[o], z[o]
+        run = np.r_[True, (z[1:] != z[:-1]) | (i[1:] != i[:-1] + 1)] if len(i) else np.zeros(0, dtype=bool)
+        starts = np.flatnonzero(run)
+        last = i[np.r_[starts[1:], len(i)] - 1] if len(i) else np.zeros(0, dtype=np.intp)
+        exits = last + 1 < len(W)
+        found = self._spans[vid] = (z[starts], i[starts], np.where(exits, last + 1, len(W) - 1), exits)
+        return found
+
+    def _span_of(self, fleet: JunctionFleet, row: int, z: int, target: int):
+        """``(entry, exit, exits)`` of zone ``z``'s interval holding waypoint ``target``, or None."""
+        zs, e, x, ex = self.intervals(fleet, row)
+        hit = np.flatnonzero((zs == z) & (e <= target) & (target <= x))
+        return None if not len(hit) else (int(e[hit[0]]), int(x[hit[0]]), bool(ex[hit[0]]))
+
+    def _wanting(self, fleet: JunctionFleet, r: np.ndarray, new_lo: np.ndarray,
+                 new_hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(zone, row)`` pairs of requesters ``r`` that need the zone's token unless they hold it,
+        grouped by zone, rows ascending: the requested stop point ``k + 1`` lies in one of the
+        zone's intervals (entry to exit slot) and the current one does not, or the vehicle gave
+        the zone's token back (:meth:`give_back`)."""
+        ids = fleet.ids
+        if len(self._spans) > 4 * len(ids) + 1000:  # vehicles gone: drop their routes
+            live = set(ids)
+            self._spans = {v: s for v, s in self._spans.items() if v in live}
+        rows, zs, need = [], [], []
+        for i in r.tolist():
+            z, e, x, _ = self.intervals(fleet, i)
+            if not len(z):
+                continue
+            k = fleet.route(i)[2]
+            on = (e <= k + 1) & (k + 1 <= x)
+            if not on.any():
+                continue
+            gb = self.given_back.get(ids[i], ())
+            fresh = on & ((k < e) | np.isin(z, list(gb)))
+            rows.append(np.full(int(fresh.sum()), i))
+            zs.append(z[fresh])
+        if not rows:
+            return np.zeros(0, dtype=np.intp), np.zeros(0, dtype=np.intp)
+        row, zone = np.concatenate(rows).astype(np.intp), np.concatenate(zs).astype(np.intp)
+        o = np.lexsort((row, zone))
+        return zone[o], row[o]
+
+    def route_through(self, fleet: JunctionFleet, row: int, z: int):
+        """``(key, slot, lo, hi)``: exit slot and corridor of row ``row`` through zone ``z``'s guard.
+
+        The corridor holds a box around every waypoint from the current one ``k`` to the exit
+        slot (:meth:`AuthorityReach.half_extent`); the slot box is the hold box ``T^0 ⊕
+        footprint`` at the exit slot (room for the stopped vehicle only: the claims no longer
+        reach backwards), None when the route ends inside the guard.  Cached per (vehicle, zone,
+        current waypoint)."""
+        W, H, k = fleet.route(row)
+        key = (fleet.ids[row], z, k)
+        found = self._routes.get(key)
+        if found is not None:
+            return found
+        cls = self.classes[fleet.family[row]]
+        span = self._span_of(fleet, row, z, k + 1)
+        last, exits = (span[1], span[2]) if span is not None else (min(k + 1, len(W) - 1), False)
+        idx = np.arange(k, last + 1)
+        nxt = np.minimum(idx + 1, len(H) - 1)
+        r1 = cls.half_extent(H[idx], H[nxt])
+        corr_lo, corr_hi = W[idx] - r1, W[idx] + r1
+        slot = None
+        if exits:
+            h = cls.hold_half(H[last:last + 1], H[nxt[-1]:nxt[-1] + 1])[0]
+            slot = (W[last] - h, W[last] + h)
+        self._routes[key] = found = (key, slot, corr_lo, corr_hi)
+        return found
