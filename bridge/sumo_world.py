@@ -351,7 +351,6 @@ def run_sumo(target: str, out: Path, opts) -> dict:
                 f"reach-tightened ones); run with --controller paper, or add --pedestrians ignore")
         sim = Cosim(classes, specs, settings, world=world, zones=junction_zones(net), observers=observers,
                     pedestrians=peds)
-        summary["zones"], summary["zones_ignored"] = len(sim.zones), sim.zones_ignored
         bar = None
         if not getattr(opts, "quiet", False):
             from tqdm import tqdm

@@ -171,6 +171,9 @@ class JunctionGate:
         self.given_back: dict[str, set[int]] = {}
         #: vehicles standing at a red light this step (:meth:`give_back`)
         self.standing: set[str] = set()
+        #: over the run: tokens handed out, and requests withheld for want of one
+        self.tokens_granted = 0
+        self.requests_withheld = 0
 
     @staticmethod
     def guard_radius(classes) -> float:
@@ -228,6 +231,7 @@ class JunctionGate:
         wz, wrow = self._wanting(fleet, r, new_lo, new_hi)
         allowed = self._hand_out(t, fleet, pos, wz, wrow)
         req[wrow[~allowed]] = False   # only a zone's holders may ask into its guard
+        self.requests_withheld += len(np.unique(wrow[~allowed]))
         wait = self.wait
         for key in [k for k in wait if k[1] not in pos or k[1] in self.holders[k[0]]]:
             wait.pop(key, None)
@@ -326,6 +330,7 @@ class JunctionGate:
                     continue
                 holders[cid[q]] = (key_q, lo_q, hi_q)
                 allowed[P[q]] = True
+                self.tokens_granted += 1
                 if cid[q] in self.given_back:
                     self.given_back[cid[q]].discard(z)
         return allowed
