@@ -8,7 +8,9 @@ waiting order, corridors and exit-slot room of :class:`tm.junctions.JunctionGate
 changes is where they apply:
 
 * **guard**: the zone enlarged by the claims' across half-width (``max |y|`` over the across
-  factor's levels) plus half the footprint's diagonal (:meth:`AuthorityGate.guard_radius`);
+  factor's levels) plus half the footprint's diagonal, per class (:attr:`AuthorityReach.guard_reach`;
+  the gate's shared guard boxes, :meth:`AuthorityGate.guard_radius`, take the largest, and a
+  class's own guard is tested by shrinking its boxes by the difference);
 * **entry line**: without the zone's token a vehicle may not move its stop point to a waypoint
   whose hold box ``T^0 ⊕ footprint`` meets the guard -- its stop point stays behind the guard's
   edge less the ``T^0`` extent and ``L/2`` (:meth:`AuthorityGate.intervals`);
@@ -19,7 +21,7 @@ changes is where they apply:
 * **corridor**: the union of the claims the vehicle can make while its stop point moves from
   where it is to the exit slot: boxes around those waypoints, ``δ/2 + T^0`` along plus ``L/2``
   (a position lies within ``δ/2`` of a waypoint), the across half-width plus ``W/2`` across;
-* **release**: when every ``S_k`` (the bounding box of their union) has left the guard.
+* **release**: when every ``S_k`` (the bounding box of their union) has left its class's guard.
 
 Pure numpy, no simulator; safety stays with the traffic manager, which checks every request.
 """
@@ -123,6 +125,27 @@ class AuthorityGate(JunctionGate):
         super().__init__(zones, classes)
         #: vehicle id -> its route's intervals through the guards (:meth:`intervals`)
         self._spans: dict[str, tuple] = {}
+        #: per class: how much smaller than the shared guard its own guard is (m)
+        radius = self.guard_radius(self.classes.values())
+        self._shrink = {c: radius - r.guard_reach for c, r in self.classes.items()}
+        self._family: np.ndarray | None = None  # the fleet's classes during :meth:`withhold`
+
+    def withhold(self, t: int, fleet: JunctionFleet, requesting: np.ndarray, new_lo: np.ndarray,
+                 new_hi: np.ndarray) -> np.ndarray:
+        """As :meth:`tm.junctions.JunctionGate.withhold`; ``new_lo``, ``new_hi`` are not used."""
+        self._family = fleet.family
+        try:
+            return super().withhold(t, fleet, requesting, new_lo, new_hi)
+        finally:
+            self._family = None
+
+    def _release(self, pos: dict, cur_lo: np.ndarray, cur_hi: np.ndarray) -> None:
+        """Release the tokens of holders gone or whose claims (every ``S_k``) have left their
+        class's guard (the zone plus that class's :attr:`AuthorityReach.guard_reach`)."""
+        if self._family is None or not len(cur_lo):
+            return super()._release(pos, cur_lo, cur_hi)
+        d = np.array([self._shrink[c] for c in self._family.tolist()])[:, None]
+        super()._release(pos, cur_lo + d, cur_hi - d)  # a box shrunk by d against the guard
 
     @staticmethod
     def guard_radius(classes) -> float:
@@ -142,7 +165,8 @@ class AuthorityGate(JunctionGate):
         if found is not None:
             return found
         W, H, _ = fleet.route(row)
-        half = self.classes[fleet.family[row]].hold_half(H, np.r_[H[1:], H[-1:]])
+        c = fleet.family[row]
+        half = self.classes[c].hold_half(H, np.r_[H[1:], H[-1:]]) - self._shrink[c]  # its class's guard
         i, z = self.guards.pairs(W - half, W + half)
         o = np.lexsort((i, z))
         i, z = i[o], z[o]
@@ -187,6 +211,49 @@ class AuthorityGate(JunctionGate):
         row, zone = np.concatenate(rows).astype(np.intp), np.concatenate(zs).astype(np.intp)
         o = np.lexsort((row, zone))
         return zone[o], row[o]
+
+    def _path(self, fleet: JunctionFleet, row: int, z: int) -> np.ndarray | None:
+        """Waypoints (m, 2) of row ``row``'s route from zone ``z``'s entry to its exit slot, for the
+        interval holding its stop point or the next one (None if neither lies in one)."""
+        W, _, k = fleet.route(row)
+        span = self._span_of(fleet, row, z, k + 1) or self._span_of(fleet, row, z, k)
+        return None if span is None else W[span[0]:span[1] + 1]
+
+    def _follows(self, fleet: JunctionFleet, pos: dict, row: int, z: int, leaders: list) -> bool:
+        """A queue through the junction: row ``row`` may take zone ``z``'s token although its
+        corridor meets the holders ``leaders``' (or their claims fill its exit slot) when each of
+        them drives the same path through the zone (every waypoint of its path from entry to exit
+        slot within ``0.6 δ`` of theirs: the same lanes) ahead of it, and the road from its exit
+        slot on has room for them all and for it: the hold boxes at the waypoints from the slot
+        over ``sum_j ceil(((L_j + L) / 2 + hold_j + hold) / δ)`` more meet no claim but theirs.
+        Then none of them can stop inside the guard: nobody else enters that road but through this
+        zone's exit slot, which every other candidate's corridor meets."""
+        W, H, k = fleet.route(row)
+        span = self._span_of(fleet, row, z, k + 1)
+        if span is None or not span[2]:
+            return False
+        cls = self.classes[fleet.family[row]]
+        mine = W[span[0]:span[1] + 1]
+        tol = 0.6 * cls.delta
+        rows, m = [], 0
+        for h in leaders:
+            j = pos.get(h)
+            theirs = None if j is None else self._path(fleet, j, z)
+            if theirs is None or len(theirs) == 0:
+                return False
+            d = np.linalg.norm(mine[:, None, :] - theirs[None, :, :], axis=2).min(axis=1)
+            if d.max() > tol:
+                return False
+            c = self.classes[fleet.family[j]]
+            rows.append(j)
+            m += int(np.ceil((0.5 * (c.length + cls.length) + c.hold + cls.hold) / cls.delta))
+        x = span[1]
+        idx = np.arange(x, min(x + m, len(W) - 1) + 1)
+        half = cls.hold_half(H[idx], H[np.minimum(idx + 1, len(H) - 1)])
+        lo, hi = W[idx] - half, W[idx] + half
+        meet = np.all((lo[:, None, :] <= fleet.claim_hi[None]) & (hi[:, None, :] >= fleet.claim_lo[None]), axis=2)
+        meet[:, [row] + rows] = False
+        return not meet.any()
 
     def route_through(self, fleet: JunctionFleet, row: int, z: int):
         """``(key, slot, lo, hi)``: exit slot and corridor of row ``row`` through zone ``z``'s guard.

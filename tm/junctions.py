@@ -312,9 +312,9 @@ class JunctionGate:
             # is served once those holders have left).
             cid = [ids[i] for i in wrow[P].tolist()]
             since = np.array([wait.setdefault((z, v), t) for z, v in zip(zP.tolist(), cid)])
-            # candidates with room, by zone, then by waiting, then by id (the others are skipped)
-            viable = np.flatnonzero(~blocked_exit)
-            order = viable[np.lexsort((np.array(cid, dtype=object)[viable].astype(str), since[viable], zP[viable]))]
+            # candidates by zone, then by waiting, then by id; those without room at the exit slot
+            # are skipped (unless they follow holders on their path: :meth:`_follows`)
+            order = np.lexsort((np.array(cid, dtype=object).astype(str), since, zP))
             z_prev, stop = -1, False
             for q in order.tolist():
                 z = int(zP[q])
@@ -323,7 +323,11 @@ class JunctionGate:
                 if stop:
                     continue
                 key_q, _, lo_q, hi_q = routes[q]
-                if any(self.corridors_meet(key_q, lo_q, hi_q, *h) for h in holders.values()):
+                meet = [h for h, c in holders.items() if self.corridors_meet(key_q, lo_q, hi_q, *c)]
+                follows = (blocked_exit[q] or meet) and self._follows(fleet, pos, int(wrow[P[q]]), z, meet)
+                if blocked_exit[q] and not follows:
+                    continue
+                if meet and not follows:
                     stop = True
                     continue
                 if blocked_intr[q]:
@@ -334,6 +338,12 @@ class JunctionGate:
                 if cid[q] in self.given_back:
                     self.given_back[cid[q]].discard(z)
         return allowed
+
+    def _follows(self, fleet: JunctionFleet, pos: dict, row: int, z: int, leaders: list) -> bool:
+        """Whether row ``row`` may take zone ``z``'s token although its corridor meets the corridors
+        of the holders ``leaders`` or its exit slot has no room (never, here: a candidate whose
+        corridor meets a holder's waits for it)."""
+        return False
 
     def _release(self, pos: dict, cur_lo: np.ndarray, cur_hi: np.ndarray) -> None:
         """Release tokens whose holder's current claim has left the guard (or who is gone)."""

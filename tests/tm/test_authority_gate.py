@@ -87,6 +87,28 @@ def test_the_guard_is_the_zone_plus_the_claims_across_half_width_and_the_footpri
     assert zs.tolist() == [0] and entry.tolist() == [ENTRY] and exit_.tolist() == [EXIT] and exits.tolist() == [True]
 
 
+def test_each_class_has_its_own_guard():
+    """With a bus class (claims 1.4 m across, 12 m x 2.5 m: its guard reaches 7.53 m past the zone)
+    the gate's shared guard boxes grow to the bus's, but a car's entry line, exit slot and release
+    stay its own: a car whose tail is 0.2 m outside the car's guard (well inside the bus's) gives
+    its token back."""
+    bus = AuthorityReach(hold=0.25, hold_y=0.2, across=1.4, length=12.0, width=2.5, delta=1.0)
+    g_bus = 5.0 + 1.4 + 0.5 * np.hypot(12.0, 2.5)
+    gate = AuthorityGate([J], {"car": CAR, "bus": bus})
+    np.testing.assert_allclose(gate.hi[0], [g_bus, g_bus], rtol=0, atol=1e-12)
+    scene = Scene({"A": EAST, "B": NORTH}, k={"A": ENTRY - 1, "B": ENTRY - 1})
+    fleet = scene.fleet()
+    assert [a.tolist() for a in gate.intervals(fleet, 0)] == [[0], [ENTRY], [EXIT], [True]]
+    bus_fleet = JunctionFleet(["Q"], np.array(["bus"]), fleet.claim_lo[:1], fleet.claim_hi[:1],
+                              (([scene.routes[0][0]], [scene.routes[0][1]], np.array([0])),))
+    # bus: x - 30 + 6.25 meets the guard from x = -18 (index 12); leaves it at x = 19 (index 49)
+    assert [a.tolist() for a in gate.intervals(bus_fleet, 0)] == [[0], [12], [49], [True]]
+    assert scene.withhold(gate, t=0) == {"A"}
+    claim = ((GUARD + 0.2, -1.6 - HOLD[1]), (15.0 + HOLD[0], -1.6 + HOLD[1]))
+    scene = Scene({"A": EAST, "B": NORTH}, k={"A": EXIT + 4, "B": ENTRY - 1}, claims={"A": claim})
+    assert GUARD + 0.2 < g_bus and scene.withhold(gate, t=1) == {"A", "B"} and _holders(gate) == {"B"}
+
+
 def test_without_the_token_the_stop_point_stays_before_the_entry_line():
     """A holds the token; B crosses A's corridor.  B moves its stop point waypoint by waypoint up
     to the last one whose hold box misses the guard (the entry line less T^0 and L/2), even with
@@ -130,6 +152,39 @@ def test_exit_slot_needs_room_for_the_stopped_vehicle_only(gap_m, granted):
     scene = Scene({"A": EAST, "L": ((lo_l + HOLD[0], -1.6), (300.0, -1.6))}, k={"A": ENTRY - 1}, idle="L")
     assert scene.withhold(gate) == ({"A"} if granted else set())
     assert _holders(gate) == ({"A"} if granted else set())
+
+
+@pytest.mark.parametrize("room_m, follows", [(4.8, False), (5.2, True)])
+def test_a_queue_follows_its_leader_through_with_room_for_both(room_m, follows):
+    """F queues behind the holder A on the same lanes; their corridors meet.  F takes a token too
+    when the road from the exit slot on has room for both hold boxes: the hold boxes at the slot
+    and ceil((4 + 4) / 2 + 0.25 + 0.25) = 5 waypoints beyond it (front at 13.25 + 5 m) must miss
+    L's claim, which starts 4.8 m past the slot's front (A's hold box would fit, both not) or 5.2 m
+    past.  B, crossing, waits either way; F does not overtake a vehicle waiting
+    longer (next test)."""
+    front = 11.0 + HOLD[0]
+    lo_l = front + room_m
+    gate = _gate()
+    assert Scene({"A": EAST}, k={"A": ENTRY - 1}).withhold(gate, t=0) == {"A"}
+    W = _route(*EAST)[0]
+    claim_a = (W[ENTRY + 5] - HOLD, W[ENTRY + 5] + [20.0, HOLD[1]])  # A drives on: up to x = 16.25
+    vehicles = {"A": EAST, "F": EAST, "L": ((lo_l + HOLD[0], -1.6), (300.0, -1.6))}
+    scene = Scene(vehicles, k={"A": ENTRY + 5, "F": ENTRY - 1}, idle="L", claims={"A": claim_a})
+    asked = scene.withhold(gate, t=1)
+    assert asked == ({"A", "F"} if follows else {"A"})
+    assert _holders(gate) == ({"A", "F"} if follows else {"A"})
+    # B, crossing, arrives now: it waits for both
+    scene = Scene({**vehicles, "B": NORTH}, k={"A": ENTRY + 6, "F": ENTRY, "B": ENTRY - 1}, idle="L",
+                  claims={"A": claim_a})
+    assert "B" not in scene.withhold(gate, t=2)
+
+
+def test_a_follower_does_not_overtake_a_crossing_vehicle_waiting_longer():
+    gate = _gate()
+    assert Scene({"A": EAST}, k={"A": ENTRY - 1}).withhold(gate, t=0) == {"A"}
+    assert Scene({"A": EAST, "B": NORTH}, k={"A": ENTRY + 2, "B": ENTRY - 1}).withhold(gate, t=1) == {"A"}
+    scene = Scene({"A": EAST, "B": NORTH, "F": EAST}, k={"A": ENTRY + 5, "B": ENTRY - 1, "F": ENTRY - 1})
+    assert scene.withhold(gate, t=2) == {"A"} and _holders(gate) == {"A"}
 
 
 def test_token_released_when_every_claim_has_left_the_guard():
@@ -208,18 +263,19 @@ def fleets(draw):
 @given(fleets())
 def test_holders_corridors_never_meet_and_only_holders_stop_inside(case):
     """Random fleets around one junction, each vehicle moving its stop point on by one waypoint a
-    round when its request stays (claims: its hold box): the stored corridors of the holders are pairwise
-    apart after every round, and every stop point between an entry line and its exit slot is a
-    holder's."""
+    round when its request stays (claims: its hold box): after every round the stored corridors of
+    two holders are apart unless both drive the same road (a queue through the junction), and
+    every stop point between an entry line and its exit slot is a holder's."""
     vehicles, k, idle, rounds = case
     gate = _gate()
     for t in range(rounds):
         scene = Scene(vehicles, k=k, idle=idle)
         asked = scene.withhold(gate, t=t)
-        held = list(gate.holders[0].values())
+        held = list(gate.holders[0].items())
         for a in range(len(held)):
             for b in range(a + 1, len(held)):
-                assert not boxes_meet(held[a][1], held[a][2], held[b][1], held[b][2])
+                (va, (_, lo_a, hi_a)), (vb, (_, lo_b, hi_b)) = held[a], held[b]
+                assert vehicles[va] == vehicles[vb] or not boxes_meet(lo_a, hi_a, lo_b, hi_b), (va, vb)
         k = {v: k[v] + (v in asked) for v in vehicles}
         moved = Scene(vehicles, k=k)
         for i, v in enumerate(moved.ids):
