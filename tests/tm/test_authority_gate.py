@@ -7,7 +7,7 @@ every offset between boxes is at least 0.2 m, far from round-off.
 
 The class (``CAR``): ``T^0`` within 0.25 m along and 0.2 m across, claims within 1.0 m across,
 footprint 4 m x 1.8 m, δ = 1 m.  Hold box ``T^0 ⊕ footprint``: ±2.25 m along, ±1.1 m across;
-corridor box: ±2.75 m along (δ/2 + T^0 + L/2), ±1.9 m across.  The guard of the 10 m zone ``J``
+corridor box: ±2.75 m along (δ/2 + T^0 + L/2), ±1.1 m across (T^0 + W/2).  The guard of the 10 m zone ``J``
 at the origin is the zone enlarged by 1.0 + hypot(4, 1.8) / 2 = 3.193 m: [-8.193, 8.193]^2.
 An east-bound route starting at x = -30 enters at waypoint 20 (x = -10: -10 + 2.25 meets the guard,
 -11 + 2.25 = -8.75 does not) and leaves at its exit slot, waypoint 41 (x = 11: 11 - 2.25 = 8.75
@@ -205,19 +205,29 @@ def test_token_released_when_every_claim_has_left_the_guard():
 
 
 def test_corridor_runs_from_the_stop_point_to_the_exit_slot_and_is_cached():
-    """Corridor boxes at every waypoint from the stop point to the exit slot (±2.75 along, ±1.9
+    """Corridor boxes at every waypoint from the stop point to the exit slot (±2.75 along, ±1.1
     across); the slot box is the hold box there; a route ending inside the guard has no slot."""
     gate = _gate()
     fleet = Scene({"A": EAST, "T": ((-30.0, -1.6), (0.0, -1.6))}, k={"A": ENTRY - 1, "T": ENTRY - 1}).fleet()
     key, slot, lo, hi = gate.route_through(fleet, 0, 0)
     assert key == ("A", 0, ENTRY - 1) and len(lo) == EXIT - ENTRY + 2
-    np.testing.assert_allclose(lo[0], [-11.0 - 2.75, -1.6 - 1.9], rtol=0, atol=1e-12)
-    np.testing.assert_allclose(hi[-1], [11.0 + 2.75, -1.6 + 1.9], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(lo[0], [-11.0 - 2.75, -1.6 - 1.1], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(hi[-1], [11.0 + 2.75, -1.6 + 1.1], rtol=0, atol=1e-12)
     np.testing.assert_allclose(slot[0], [11.0 - HOLD[0], -1.6 - HOLD[1]], rtol=0, atol=1e-12)
     np.testing.assert_allclose(slot[1], [11.0 + HOLD[0], -1.6 + HOLD[1]], rtol=0, atol=1e-12)
     assert gate.route_through(fleet, 0, 0)[2] is lo
     _, slot, lo, _ = gate.route_through(fleet, 1, 0)
     assert slot is None and len(lo) == 30 - (ENTRY - 1) + 1  # to its last waypoint, inside the guard
+
+
+def test_opposite_streams_hold_tokens_together_crossing_ones_do_not():
+    """Corridors are the hold regions along the path (±1.1 m across): opposite lanes 3.2 m apart
+    do not meet, so both streams cross at once; a crossing one waits."""
+    k = {v: ENTRY - 1 for v in "ABC"}
+    for paths, want in (({"A": EAST, "B": WEST}, {"A", "B"}), ({"A": EAST, "B": WEST, "C": NORTH}, {"A", "B"}),
+                        ({"A": NORTH, "B": SOUTH}, {"A", "B"}), ({"A": EAST, "C": NORTH}, {"A"})):
+        gate = _gate()
+        assert Scene(paths, k=k).withhold(gate) == want == _holders(gate), paths
 
 
 def test_a_token_given_back_at_a_red_is_needed_again_from_inside():
