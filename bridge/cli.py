@@ -295,7 +295,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--controller", choices=["paper", "authority"], default="paper",
                    help="paper (default): the paper's sets, cost and centred claims; authority: movement-authority "
                         "sets and cost with reach-tightened claims (design.md §7; car, bus, truck; single: a 600 m "
-                        "straight; junction zones off)")
+                        "straight)")
     r.add_argument("--tm", choices=["greedy", "optimal"], default=None, help="default: the scenario's")
     r.add_argument("--check", choices=["union", "timed"], default=None)
     r.add_argument("--switching", choices=["terminal", "early"], default=None)
