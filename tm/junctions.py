@@ -171,8 +171,9 @@ class JunctionGate:
         self.given_back: dict[str, set[int]] = {}
         #: vehicles standing at a red light this step (:meth:`give_back`)
         self.standing: set[str] = set()
-        #: over the run: tokens handed out, and requests withheld for want of one
+        #: over the run: tokens handed out, given back at red lights, and requests withheld for want of one
         self.tokens_granted = 0
+        self.tokens_given_back = 0
         self.requests_withheld = 0
 
     @staticmethod
@@ -198,6 +199,7 @@ class JunctionGate:
                 if vid in hs:
                     del hs[vid]
                     self.given_back.setdefault(vid, set()).add(z)
+                    self.tokens_given_back += 1
 
     # ------------------------------------------------------------------ requests
     def withhold(self, t: int, fleet: JunctionFleet, requesting: np.ndarray, new_lo: np.ndarray,
