@@ -197,25 +197,21 @@ class AuthorityGate(JunctionGate):
         ids = fleet.ids
         if len(self._spans) > 4 * len(ids) + 1000:  # vehicles gone: drop their routes
             live = set(ids)
-            self._spans = {v: s for v, s in self._spans.items() if v in live}
-        rows, zs, need = [], [], []
-        for i in r.tolist():
-            z, e, x, _ = self.intervals(fleet, i)
-            if not len(z):
-                continue
-            k = fleet.route(i)[2]
-            on = (e <= k + 1) & (k + 1 <= x)
-            if not on.any():
-                continue
-            gb = self.given_back.get(ids[i], ())
-            fresh = on & ((k < e) | np.isin(z, list(gb)))
-            rows.append(np.full(int(fresh.sum()), i))
-            zs.append(z[fresh])
-        if not rows:
+            self._spans = {v: sp for v, sp in self._spans.items() if v in live}
+        spans = [self.intervals(fleet, i) for i in r.tolist()]  # cached per vehicle
+        cnt = np.array([len(sp[0]) for sp in spans], dtype=np.intp)
+        if not cnt.sum():
             return np.zeros(0, dtype=np.intp), np.zeros(0, dtype=np.intp)
-        row, zone = np.concatenate(rows).astype(np.intp), np.concatenate(zs).astype(np.intp)
-        o = np.lexsort((row, zone))
-        return zone[o], row[o]
+        z, e, x = (np.concatenate([sp[j] for sp in spans]).astype(np.intp) for j in range(3))
+        row = np.repeat(r, cnt)
+        k = np.concatenate([np.asarray(kk, dtype=np.intp) for _, _, kk in fleet.parts])[row]
+        on = (e <= k + 1) & (k + 1 <= x)
+        fresh = on & (k < e)
+        if self.given_back:  # a token given back is needed again, from inside the guard too
+            fresh |= on & np.array([zz in self.given_back.get(ids[i], ()) for i, zz in zip(row.tolist(), z.tolist())],
+                                   dtype=bool).reshape(-1)
+        o = np.lexsort((row[fresh], z[fresh]))
+        return z[fresh][o], row[fresh][o]
 
     def _path(self, fleet: JunctionFleet, row: int, z: int) -> np.ndarray | None:
         """Waypoints (m, 2) of row ``row``'s route from zone ``z``'s entry to its exit slot, for the
