@@ -126,6 +126,8 @@ class AuthorityGate(JunctionGate):
     (the rules are on the stop points).
     """
 
+    pass_blocked = True
+
     def __init__(self, zones, classes: dict):
         super().__init__(zones, classes)
         #: vehicle id -> its route's intervals through the guards (:meth:`intervals`)

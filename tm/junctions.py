@@ -153,6 +153,11 @@ class JunctionGate:
         the largest claim radius of any class (``max |P^N|`` plus half the footprint diagonal).
     """
 
+    #: Whether a waiter may take a token past one that a holder blocks (earlier in the order) when
+    #: its corridor misses that one's: it cannot delay it then.  Off: the first blocked waiter ends
+    #: the round.
+    pass_blocked = False
+
     def __init__(self, zones, classes: dict):
         self.zones = list(zones)
         self.classes = dict(classes)
@@ -317,20 +322,21 @@ class JunctionGate:
             # candidates by zone, then by waiting, then by id; those without room at the exit slot
             # are skipped (unless they follow holders on their path: :meth:`_follows`)
             order = np.lexsort((np.array(cid, dtype=object).astype(str), since, zP))
-            z_prev, stop = -1, False
+            z_prev, blocked = -1, []  # corridors of the waiters that a holder blocks, this round
             for q in order.tolist():
                 z = int(zP[q])
                 if z != z_prev:
-                    z_prev, stop, holders = z, False, self.holders[z]
-                if stop:
-                    continue
+                    z_prev, blocked, holders = z, [], self.holders[z]
                 key_q, _, lo_q, hi_q = routes[q]
+                if blocked and not (self.pass_blocked and
+                                    not any(self.corridors_meet(key_q, lo_q, hi_q, *b) for b in blocked)):
+                    continue
                 meet = [h for h, c in holders.items() if self.corridors_meet(key_q, lo_q, hi_q, *c)]
                 follows = (blocked_exit[q] or meet) and self._follows(fleet, pos, int(wrow[P[q]]), z, meet)
                 if blocked_exit[q] and not follows:
                     continue
                 if meet and not follows:
-                    stop = True
+                    blocked.append((key_q, lo_q, hi_q))
                     continue
                 if blocked_intr[q]:
                     continue

@@ -187,6 +187,32 @@ def test_a_follower_does_not_overtake_a_crossing_vehicle_waiting_longer():
     assert scene.withhold(gate, t=2) == {"A"} and _holders(gate) == {"A"}
 
 
+@pytest.mark.parametrize("pass_blocked", [True, False])
+def test_a_later_waiter_passes_a_blocked_one_only_off_its_path(pass_blocked):
+    """A holds the token; B (north) waits for it, first in order.  C, waiting less, clips the
+    guard's far corner (corridor apart from A's and B's): it takes a token -- it cannot delay B.
+    D (west) misses A's corridor but crosses B's: it waits behind B.  (Paper mode's rule, the
+    first blocked waiter ending the round: C waits too.)"""
+    C = ((-25.0, -11.0), (5.0, 19.0))
+    gate = _gate()
+    gate.pass_blocked = pass_blocked
+    k = {"A": ENTRY - 1, "B": ENTRY - 1}
+    assert Scene({"A": EAST, "B": NORTH}, k=k).withhold(gate, t=0) == {"A"}
+    scene = Scene({"A": EAST, "B": NORTH, "C": C, "D": WEST}, k={**k, "A": ENTRY + 2, "C": 20, "D": ENTRY - 1},
+                  idle="A")
+    fleet = scene.fleet()
+    corr = {v: gate.route_through(fleet, i, 0) for i, v in enumerate(scene.ids) if v != "A"}
+    a = gate.holders[0]["A"]
+    assert gate.intervals(fleet, 2)[1].tolist() == [21]  # C's next stop point enters its guard
+    assert not boxes_meet(corr["C"][2], corr["C"][3], a[1], a[2])
+    assert not boxes_meet(corr["C"][2], corr["C"][3], corr["B"][2], corr["B"][3])
+    assert boxes_meet(corr["D"][2], corr["D"][3], corr["B"][2], corr["B"][3])
+    assert not boxes_meet(corr["D"][2], corr["D"][3], a[1], a[2])
+    gate.wait[(0, "B")] = -1  # B has waited longest
+    asked = scene.withhold(gate, t=1)
+    assert asked == ({"C"} if pass_blocked else set()) and _holders(gate) == ({"A", "C"} if pass_blocked else {"A"})
+
+
 def test_token_released_when_every_claim_has_left_the_guard():
     """A's stop point is past its exit slot; its claim (from its tail) still reaches 0.2 m into
     the guard: A keeps the token and B waits.  0.2 m out: released, and B gets it in the same
