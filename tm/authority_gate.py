@@ -26,7 +26,10 @@ changes is where they apply:
   is another one stopped in its path.  (With the moving claims' width, ``max |y|`` of every level
   plus ``W/2``, adjacent lanes' corridors meet: on ``grid``, 300 s, seeds 1 / 2: 88 / 77 of 150
   arrived, against 104 / 97 with this width.);
-* **release**: when every ``S_k`` (the bounding box of their union) has left its class's guard.
+* **release**: when every ``S_k`` (the bounding box of their union) has left its class's guard;
+* **queues** (:meth:`AuthorityGate._follows`): a vehicle on the same lanes behind a holder takes a
+  token too when the exit road has room for all of them; and a later waiter passes one that a
+  holder blocks when its corridor misses that one's (``pass_blocked``: it cannot delay it).
 
 Pure numpy, no simulator; safety stays with the traffic manager, which checks every request.
 """
