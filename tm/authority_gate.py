@@ -257,9 +257,10 @@ class AuthorityGate(JunctionGate):
         idx = np.arange(x, min(x + m, len(W) - 1) + 1)
         half = cls.hold_half(H[idx], H[np.minimum(idx + 1, len(H) - 1)])
         lo, hi = W[idx] - half, W[idx] + half
-        meet = np.all((lo[:, None, :] <= fleet.claim_hi[None]) & (hi[:, None, :] >= fleet.claim_lo[None]), axis=2)
-        meet[:, [row] + rows] = False
-        return not meet.any()
+        near = np.flatnonzero(np.all((fleet.claim_lo <= hi.max(axis=0)) & (fleet.claim_hi >= lo.min(axis=0)), axis=1))
+        near = near[~np.isin(near, [row] + rows)]  # the queue's own claims do not count
+        c_lo, c_hi = fleet.claim_lo[near], fleet.claim_hi[near]
+        return not np.any(np.all((lo[:, None, :] <= c_hi[None]) & (hi[:, None, :] >= c_lo[None]), axis=2))
 
     def route_through(self, fleet: JunctionFleet, row: int, z: int):
         """``(key, slot, lo, hi)``: exit slot and corridor of row ``row`` through zone ``z``'s guard.
