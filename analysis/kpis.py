@@ -296,8 +296,10 @@ def run_tables(sim, tripinfo=None) -> tuple[dict, pd.DataFrame, pd.DataFrame]:
     figures : dict
         :func:`summarise` of the tables plus the loop's safety counters
         (``collisions_world, invariant_violations, claim_violations, footprint_overlaps,
-        constraint_violations``) and :func:`analysis.safety.verdict` of them (``safe``,
-        ``safety_violations``).
+        constraint_violations``), :func:`analysis.safety.verdict` of them (``safe``,
+        ``safety_violations``), and the junction layer's ``zones``, ``zones_ignored`` (zones it does
+        not use), ``junction_tokens`` (tokens handed out), ``junction_given_back`` (at red lights)
+        and ``junction_withheld`` (requests withheld for want of one).
     steps, vehicles : DataFrame
     """
     from controllers.classes import builtin_classes
@@ -329,4 +331,9 @@ def run_tables(sim, tripinfo=None) -> tuple[dict, pd.DataFrame, pd.DataFrame]:
     from analysis.safety import verdict
 
     figures.update(verdict(figures))
+    gate = getattr(sim, "junctions", None)  # the junction liveness layer (tm.junctions, tm.authority_gate)
+    if gate is not None:
+        figures.update(zones=len(gate.zones), zones_ignored=int(getattr(sim, "zones_ignored", 0)),
+                       junction_tokens=int(gate.tokens_granted), junction_given_back=int(gate.tokens_given_back),
+                       junction_withheld=int(gate.requests_withheld))
     return figures, steps, vehicles

@@ -301,7 +301,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--controller", choices=["paper", "authority"], default="paper",
                    help="paper (default): the paper's sets, cost and centred claims; authority: movement-authority "
                         "sets and cost with reach-tightened claims (design.md §7; car, bus, truck; single: a 600 m "
-                        "straight; junction zones off)")
+                        "straight)")
     r.add_argument("--tm", choices=["greedy", "optimal"], default=None, help="default: the scenario's")
     r.add_argument("--speed-limits", choices=["obey", "ignore"], default="obey",
                    help="obey (default): lanes' speed limits bound the vehicles' speed (with look-ahead); "

@@ -38,8 +38,9 @@ from controllers.stmpc import STMPC
 from bridge.groups import _Group, _headings
 from controllers.synthesis import synthesize
 from tm.claims import Claims
-from tm.reach import ReachClaims
+from tm.reach import ReachClaims, world_aabb
 from tm.reach_book import ReachBook, admit_reach, footprint_claims
+from tm.authority_gate import AuthorityGate, AuthorityReach
 from tm.junctions import ClassReach, JunctionFleet, JunctionGate, Zone
 from tm.manager import FleetState, TrafficManager
 from tm.pedestrians import STRIPING_SPEED_FACTOR, PedestrianRule, footprint_contacts
@@ -246,13 +247,19 @@ class Cosim:
         self.constraint_violations = 0
         self.collisions_world: set = set()
         self.last_decision = None
-        # zones: guards, tokens, corridors and queues (the liveness layer, tm.junctions)
-        # the junction layer's extents assume centred sets: off in authority mode (its TM keeps safety)
-        self.zones = [] if self.authority else list(zones or [])
-        self.zones_ignored = len(zones or []) if self.authority else 0
-        self.junctions = JunctionGate(self.zones, {
-            c: ClassReach.of(f.position_sets, self.classes[c].length, self.classes[c].width,
-                             self.classes[c].model.frame == "road") for c, f in self.families.items()})
+        # zones: guards, tokens, corridors and queues (the liveness layer, tm.junctions); in
+        # authority mode on the stop points and reach claims (tm.authority_gate)
+        self.zones = list(zones or [])
+        self.zones_ignored = 0  # zones the liveness layer does not use (none: both modes have one)
+        if self.authority:
+            self.junctions = AuthorityGate(self.zones, {
+                c: AuthorityReach.of(m.tables, self.classes[c].length, self.classes[c].width,
+                                     self.classes[c].model.delta) for c, m in self.reach.models.items()})
+        else:
+            self.junctions = JunctionGate(self.zones, {
+                c: ClassReach.of(f.position_sets, self.classes[c].length, self.classes[c].width,
+                                 self.classes[c].model.frame == "road") for c, f in self.families.items()})
+        self._claims_now: ReachClaims | None = None  # authority: this step's claims before the decision
         self._ms_request = self._ms_gate = 0.0  # this step's request indices and junction tokens
         # traffic lights (tm.signals): the vehicles' stop lines; link states read once per step
         self.signal_book = SignalBook(settings.signals)
@@ -325,6 +332,7 @@ class Cosim:
         requests into a junction guard without its token withheld (:meth:`_gate`)."""
         state = self._fleet(with_requests=True)
         self._link_state = None
+        self._claims_now = self._reach_claims() if self.authority and state is not None else None
         if state is not None and len(self.signal_book):
             state = self._signals(state)
         elif self.junctions.standing:
@@ -422,15 +430,19 @@ class Cosim:
         return self.junctions.hi
 
     def _gate(self, state: FleetState) -> FleetState:
-        """Withhold requests into a zone guard whose token another vehicle holds (see :class:`Zone`)."""
-        cur = self.tm.claims(state)
-        cur_lo, cur_hi = cur.aabb()
+        """Withhold requests into a zone guard whose token another vehicle holds (see :class:`Zone`;
+        authority mode: stop points past an entry line, :mod:`tm.authority_gate`)."""
         r = np.flatnonzero(state.requesting)
-        new_lo = new_hi = np.zeros((0, 2))
-        if len(r):
-            new = Claims(cur.table, cur.family[r], state.req_centre[r], state.req_index[r], state.req_heading[r],
-                         cur.length[r], cur.width[r])
-            new_lo, new_hi = new.aabb()
+        if self.authority:  # the rules are on the stop points: the new claims' boxes are not used
+            cur_lo, cur_hi = world_aabb(self._claims_now)
+            new_lo = new_hi = np.zeros((len(r), 2))
+        else:
+            cur = self.tm.claims(state)
+            cur_lo, cur_hi = cur.aabb()
+            new_lo = new_hi = np.zeros((0, 2))
+            if len(r):
+                new_lo, new_hi = Claims(cur.table, cur.family[r], state.req_centre[r], state.req_index[r],
+                                        state.req_heading[r], cur.length[r], cur.width[r]).aabb()
         fleet = JunctionFleet(state.ids, state.family, cur_lo, cur_hi,
                               tuple((g.W, g.H, g.k) for g in self.groups.values() if g.ids))
         req = self.junctions.withhold(self.t, fleet, state.requesting, new_lo, new_hi)
@@ -484,7 +496,7 @@ class Cosim:
         if state is not None:
             # 2. TM: Go/Stop for every request
             td = time.perf_counter()
-            dec = self.tm.decide_reach(state, self._reach_claims(), self._reach_claims(state)) \
+            dec = self.tm.decide_reach(state, self._claims_now, self._reach_claims(state)) \
                 if self.authority else self.tm.decide(state)
             ms_decide = (time.perf_counter() - td) * 1e3
             self.last_decision = dec

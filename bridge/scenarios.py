@@ -142,8 +142,6 @@ def run_multi(name: str, out: Path, opts, world=None, specs=None) -> dict:
                                                     {"scenario": name, "seed": opts.seed, **options})
         observers.append(StreamingOutputs(out, dict(summary)))  # last: the row is complete by then
         sim = Cosim(classes, specs, settings, world=world, zones=zones, observers=observers)
-        if sim.zones_ignored:  # say so: the junction liveness layer assumes centred sets
-            summary["zones_ignored"] = sim.zones_ignored
         max_steps = int(getattr(opts, "max_steps", 0) or 20000)
         sim.run(max_steps)
         summary["complete"] = True

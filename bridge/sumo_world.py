@@ -356,8 +356,6 @@ def run_sumo(target: str, out: Path, opts) -> dict:
                 f"reach-tightened ones); run with --controller paper, or add --pedestrians ignore")
         sim = Cosim(classes, specs, settings, world=world, zones=junction_zones(net), observers=observers,
                     pedestrians=peds)
-        if sim.zones_ignored:  # authority mode: the junction liveness layer is off (it assumes centred sets)
-            summary["zones_ignored"] = sim.zones_ignored
         bar = None
         if not getattr(opts, "quiet", False):
             from tqdm import tqdm

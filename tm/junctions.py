@@ -153,11 +153,15 @@ class JunctionGate:
         the largest claim radius of any class (``max |P^N|`` plus half the footprint diagonal).
     """
 
+    #: Whether a waiter may take a token past one that a holder blocks (earlier in the order) when
+    #: its corridor misses that one's: it cannot delay it then.  Off: the first blocked waiter ends
+    #: the round.
+    pass_blocked = False
+
     def __init__(self, zones, classes: dict):
         self.zones = list(zones)
         self.classes = dict(classes)
-        radius = max(c.top + 0.5 * np.hypot(c.length, c.width) for c in self.classes.values()) \
-            if self.classes else 0.0
+        radius = self.guard_radius(self.classes.values())
         self.lo = np.array([z.lo for z in self.zones], dtype=float).reshape(-1, 2) - radius
         self.hi = np.array([z.hi for z in self.zones], dtype=float).reshape(-1, 2) + radius
         self.guards = GuardIndex(self.lo, self.hi)
@@ -172,6 +176,16 @@ class JunctionGate:
         self.given_back: dict[str, set[int]] = {}
         #: vehicles standing at a red light this step (:meth:`give_back`)
         self.standing: set[str] = set()
+        #: over the run: tokens handed out, given back at red lights, and requests withheld for want of one
+        self.tokens_granted = 0
+        self.tokens_given_back = 0
+        self.requests_withheld = 0
+
+    @staticmethod
+    def guard_radius(classes) -> float:
+        """How far the guard reaches beyond the zone (m): the largest claim radius of any class
+        (``max |P^N|`` plus half the footprint diagonal; centred claims reach backwards too)."""
+        return max((c.top + 0.5 * np.hypot(c.length, c.width) for c in classes), default=0.0)
 
     def give_back(self, ids) -> None:
         """The vehicles ``ids`` stand at a red light this step (replaces the last call's set):
@@ -190,6 +204,7 @@ class JunctionGate:
                 if vid in hs:
                     del hs[vid]
                     self.given_back.setdefault(vid, set()).add(z)
+                    self.tokens_given_back += 1
 
     # ------------------------------------------------------------------ requests
     def withhold(self, t: int, fleet: JunctionFleet, requesting: np.ndarray, new_lo: np.ndarray,
@@ -220,6 +235,23 @@ class JunctionGate:
         r = np.flatnonzero(req)
         if not len(r):
             return req
+        wz, wrow = self._wanting(fleet, r, new_lo, new_hi)
+        allowed = self._hand_out(t, fleet, pos, wz, wrow)
+        req[wrow[~allowed]] = False   # only a zone's holders may ask into its guard
+        self.requests_withheld += len(np.unique(wrow[~allowed]))
+        wait = self.wait
+        for key in [k for k in wait if k[1] not in pos or k[1] in self.holders[k[0]]]:
+            wait.pop(key, None)
+        for vid in [v for v, zs in self.given_back.items() if v not in pos or not zs]:
+            del self.given_back[vid]
+        return req
+
+    def _wanting(self, fleet: JunctionFleet, r: np.ndarray, new_lo: np.ndarray,
+                 new_hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(zone, row)`` pairs of requesters ``r`` that need the zone's token unless they hold it,
+        grouped by zone, rows ascending: the new claim reaches a guard the current claim is not
+        in, or a guard whose token the vehicle gave back (:meth:`give_back`)."""
+        cur_lo, cur_hi, ids = fleet.claim_lo, fleet.claim_hi, fleet.ids
         # (requester, zone) pairs whose new claim reaches a guard its current claim is not in
         ni, nz = self.guards.pairs(new_lo, new_hi)
         ci, cz = self.guards.pairs(cur_lo[r], cur_hi[r])
@@ -231,6 +263,14 @@ class JunctionGate:
             fresh |= again
         want = np.sort(nz[fresh] * len(r) + ni[fresh])             # grouped by zone, rows ascending
         wz, wrow = want // len(r), r[want % len(r)]
+        return wz, wrow
+
+    def _hand_out(self, t: int, fleet: JunctionFleet, pos: dict, wz: np.ndarray,
+                  wrow: np.ndarray) -> np.ndarray:
+        """Hand out tokens to the pairs ``(wz, wrow)`` (from :meth:`_wanting`) that wait for one;
+        returns which pairs may ask (holders, and the vehicles given a token now)."""
+        cur_lo, cur_hi, ids = fleet.claim_lo, fleet.claim_hi, fleet.ids
+        n = len(ids)
         if len(self._routes) > 100_000:  # stale (vehicle, waypoint) keys: start over
             self._routes.clear()
         wait = self.wait
@@ -279,32 +319,39 @@ class JunctionGate:
             # is served once those holders have left).
             cid = [ids[i] for i in wrow[P].tolist()]
             since = np.array([wait.setdefault((z, v), t) for z, v in zip(zP.tolist(), cid)])
-            # candidates with room, by zone, then by waiting, then by id (the others are skipped)
-            viable = np.flatnonzero(~blocked_exit)
-            order = viable[np.lexsort((np.array(cid, dtype=object)[viable].astype(str), since[viable], zP[viable]))]
-            z_prev, stop = -1, False
+            # candidates by zone, then by waiting, then by id; those without room at the exit slot
+            # are skipped (unless they follow holders on their path: :meth:`_follows`)
+            order = np.lexsort((np.array(cid, dtype=object).astype(str), since, zP))
+            z_prev, blocked = -1, []  # corridors of the waiters that a holder blocks, this round
             for q in order.tolist():
                 z = int(zP[q])
                 if z != z_prev:
-                    z_prev, stop, holders = z, False, self.holders[z]
-                if stop:
-                    continue
+                    z_prev, blocked, holders = z, [], self.holders[z]
                 key_q, _, lo_q, hi_q = routes[q]
-                if any(self.corridors_meet(key_q, lo_q, hi_q, *h) for h in holders.values()):
-                    stop = True
+                if blocked and not (self.pass_blocked and
+                                    not any(self.corridors_meet(key_q, lo_q, hi_q, *b) for b in blocked)):
+                    continue
+                meet = [h for h, c in holders.items() if self.corridors_meet(key_q, lo_q, hi_q, *c)]
+                follows = (blocked_exit[q] or meet) and self._follows(fleet, pos, int(wrow[P[q]]), z, meet)
+                if blocked_exit[q] and not follows:
+                    continue
+                if meet and not follows:
+                    blocked.append((key_q, lo_q, hi_q))
                     continue
                 if blocked_intr[q]:
                     continue
                 holders[cid[q]] = (key_q, lo_q, hi_q)
                 allowed[P[q]] = True
+                self.tokens_granted += 1
                 if cid[q] in self.given_back:
                     self.given_back[cid[q]].discard(z)
-        req[wrow[~allowed]] = False   # only a zone's holders may ask into its guard
-        for key in [k for k in wait if k[1] not in pos or k[1] in self.holders[k[0]]]:
-            wait.pop(key, None)
-        for vid in [v for v, zs in self.given_back.items() if v not in pos or not zs]:
-            del self.given_back[vid]
-        return req
+        return allowed
+
+    def _follows(self, fleet: JunctionFleet, pos: dict, row: int, z: int, leaders: list) -> bool:
+        """Whether row ``row`` may take zone ``z``'s token although its corridor meets the corridors
+        of the holders ``leaders`` or its exit slot has no room (never, here: a candidate whose
+        corridor meets a holder's waits for it)."""
+        return False
 
     def _release(self, pos: dict, cur_lo: np.ndarray, cur_hi: np.ndarray) -> None:
         """Release tokens whose holder's current claim has left the guard (or who is gone)."""

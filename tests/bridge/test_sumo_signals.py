@@ -60,6 +60,18 @@ def test_red_light_never_passed_and_vehicles_arrive(tls_cfg, tmp_path, monkeypat
     assert s["vehicles_arrived"] >= 10, s              # liveness: every stream gets through
 
 
+def test_red_light_never_passed_authority(tls_cfg, tmp_path, monkeypatch):
+    """The same with ``--controller authority``: no line crossed on red (SUMO's view), every
+    stream gets through, no collision, and the junction tokens are used and given back at red."""
+    rc, s, watch = _run(tls_cfg, tmp_path / "authority", monkeypatch, "--controller", "authority")
+    assert rc == 0 and s["complete"], s.get("error")
+    assert watch.red_seen > 0 and watch.crossed > 0 and watch.crossed_red == []
+    assert s["red_violations"] == 0 and s["signal_withheld"] > 0
+    assert s["collisions_sumo"] == 0 and s["collisions_geometric"] == 0 and s["safe"] is True, s
+    assert s["zones_ignored"] == 0 and s["junction_tokens"] > 0 and s["junction_given_back"] > 0
+    assert s["vehicles_arrived"] >= 10, s
+
+
 def test_signals_ignore_passes_reds_and_counts_them(tls_cfg, tmp_path, monkeypatch):
     rc, s, watch = _run(tls_cfg, tmp_path / "ignore", monkeypatch, "--signals", "ignore")
     assert rc == 0 and s["complete"], s.get("error")

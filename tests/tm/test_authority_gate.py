@@ -1,0 +1,327 @@
+"""The junction liveness layer for movement authority (tm.authority_gate) without a simulator.
+
+Each test builds a :class:`JunctionFleet` by hand: straight routes with waypoints 1 m apart (the
+waypoint ``k`` is the vehicle's stop point), each vehicle's claim box given explicitly (by default
+its hold box: at rest at its stop point).  Geometry is exact box comparisons of the same floats;
+every offset between boxes is at least 0.2 m, far from round-off.
+
+The class (``CAR``): ``T^0`` within 0.25 m along and 0.2 m across, claims within 1.0 m across,
+footprint 4 m x 1.8 m, δ = 1 m.  Hold box ``T^0 ⊕ footprint``: ±2.25 m along, ±1.1 m across;
+corridor box: ±2.75 m along (δ/2 + T^0 + L/2), ±1.1 m across (T^0 + W/2).  The guard of the 10 m zone ``J``
+at the origin is the zone enlarged by 1.0 + hypot(4, 1.8) / 2 = 3.193 m: [-8.193, 8.193]^2.
+An east-bound route starting at x = -30 enters at waypoint 20 (x = -10: -10 + 2.25 meets the guard,
+-11 + 2.25 = -8.75 does not) and leaves at its exit slot, waypoint 41 (x = 11: 11 - 2.25 = 8.75
+misses the guard, 10 - 2.25 does not).
+"""
+
+import numpy as np
+import pytest
+from hypothesis import given, settings, strategies as st
+
+from tm.authority_gate import AuthorityGate, AuthorityReach
+from tm.boxes import boxes_meet
+from tm.junctions import JunctionFleet, Zone
+
+CAR = AuthorityReach(hold=0.25, hold_y=0.2, across=1.0, length=4.0, width=1.8, delta=1.0)
+J = Zone("J", (-5.0, -5.0), (5.0, 5.0))
+GUARD = 5.0 + 1.0 + 0.5 * np.hypot(4.0, 1.8)
+HOLD = np.array([2.25, 1.1])  # hold box half extents along, across
+ENTRY, EXIT = 20, 41          # of the routes below (they all start 30 m from the centre)
+
+EAST = ((-30.0, -1.6), (60.0, -1.6))
+WEST = ((30.0, 1.6), (-60.0, 1.6))
+NORTH = ((1.6, -30.0), (1.6, 60.0))
+SOUTH = ((-1.6, 30.0), (-1.6, -60.0))
+
+
+def _route(start, end):
+    a, b = np.asarray(start, float), np.asarray(end, float)
+    n = int(np.ceil(np.linalg.norm(b - a))) + 1
+    W = a + np.linspace(0.0, 1.0, n)[:, None] * (b - a)
+    return W, np.full(n, np.arctan2(*(b - a)[::-1]))
+
+
+class Scene:
+    """Vehicles ``id -> (start, end)`` at stop point ``k`` (0 unless given), requesting ``k + 1``
+    unless listed in ``idle``; claim boxes: ``claims[id] = (lo, hi)``, else the hold box at ``k``."""
+
+    def __init__(self, vehicles: dict, k: dict | None = None, idle=(), claims: dict | None = None):
+        self.ids = list(vehicles)
+        self.routes = [_route(*vehicles[v]) for v in self.ids]
+        self.k = np.array([(k or {}).get(v, 0) for v in self.ids], dtype=np.intp)
+        self.requesting = np.array([v not in idle for v in self.ids])
+        self.claims = dict(claims or {})
+
+    def hold_box(self, i: int):
+        W, H = self.routes[i]
+        h = CAR.hold_half(H[self.k[i]:self.k[i] + 1])[0]
+        return W[self.k[i]] - h, W[self.k[i]] + h
+
+    def fleet(self):
+        boxes = [self.claims.get(v) or self.hold_box(i) for i, v in enumerate(self.ids)]
+        lo = np.array([b[0] for b in boxes], dtype=float).reshape(-1, 2)
+        hi = np.array([b[1] for b in boxes], dtype=float).reshape(-1, 2)
+        return JunctionFleet(self.ids, np.array(["car"] * len(self.ids)), lo, hi,
+                             (([W for W, _ in self.routes], [H for _, H in self.routes], self.k),))
+
+    def withhold(self, gate, t=0):
+        n = int(self.requesting.sum())
+        req = gate.withhold(t, self.fleet(), self.requesting, np.zeros((n, 2)), np.zeros((n, 2)))
+        return {v for v, q in zip(self.ids, req) if q}
+
+
+def _gate():
+    return AuthorityGate([J], {"car": CAR})
+
+
+def _holders(gate):
+    return set(gate.holders[0])
+
+
+def test_the_guard_is_the_zone_plus_the_claims_across_half_width_and_the_footprint():
+    """Not the paper's largest claim radius: the claims no longer reach backwards."""
+    gate = _gate()
+    np.testing.assert_allclose(gate.hi[0], [GUARD, GUARD], rtol=0, atol=1e-12)  # sums of O(10) m
+    np.testing.assert_allclose(gate.lo[0], [-GUARD, -GUARD], rtol=0, atol=1e-12)
+    zs, entry, exit_, exits = gate.intervals(Scene({"A": EAST}).fleet(), 0)
+    assert zs.tolist() == [0] and entry.tolist() == [ENTRY] and exit_.tolist() == [EXIT] and exits.tolist() == [True]
+
+
+def test_each_class_has_its_own_guard():
+    """With a bus class (claims 1.4 m across, 12 m x 2.5 m: its guard reaches 7.53 m past the zone)
+    the gate's shared guard boxes grow to the bus's, but a car's entry line, exit slot and release
+    stay its own: a car whose tail is 0.2 m outside the car's guard (well inside the bus's) gives
+    its token back."""
+    bus = AuthorityReach(hold=0.25, hold_y=0.2, across=1.4, length=12.0, width=2.5, delta=1.0)
+    g_bus = 5.0 + 1.4 + 0.5 * np.hypot(12.0, 2.5)
+    gate = AuthorityGate([J], {"car": CAR, "bus": bus})
+    np.testing.assert_allclose(gate.hi[0], [g_bus, g_bus], rtol=0, atol=1e-12)
+    scene = Scene({"A": EAST, "B": NORTH}, k={"A": ENTRY - 1, "B": ENTRY - 1})
+    fleet = scene.fleet()
+    assert [a.tolist() for a in gate.intervals(fleet, 0)] == [[0], [ENTRY], [EXIT], [True]]
+    bus_fleet = JunctionFleet(["Q"], np.array(["bus"]), fleet.claim_lo[:1], fleet.claim_hi[:1],
+                              (([scene.routes[0][0]], [scene.routes[0][1]], np.array([0])),))
+    # bus: x - 30 + 6.25 meets the guard from x = -18 (index 12); leaves it at x = 19 (index 49)
+    assert [a.tolist() for a in gate.intervals(bus_fleet, 0)] == [[0], [12], [49], [True]]
+    assert scene.withhold(gate, t=0) == {"A"}
+    claim = ((GUARD + 0.2, -1.6 - HOLD[1]), (15.0 + HOLD[0], -1.6 + HOLD[1]))
+    scene = Scene({"A": EAST, "B": NORTH}, k={"A": EXIT + 4, "B": ENTRY - 1}, claims={"A": claim})
+    assert GUARD + 0.2 < g_bus and scene.withhold(gate, t=1) == {"A", "B"} and _holders(gate) == {"B"}
+
+
+def test_without_the_token_the_stop_point_stays_before_the_entry_line():
+    """A holds the token; B crosses A's corridor.  B moves its stop point waypoint by waypoint up
+    to the last one whose hold box misses the guard (the entry line less T^0 and L/2), even with
+    its moving claim already reaching into the guard, and no further."""
+    W = _route(*NORTH)[0]
+    assert W[ENTRY - 1, 1] + HOLD[0] < -GUARD - 0.2 and W[ENTRY, 1] + HOLD[0] > -GUARD + 0.2
+    gate = _gate()
+    assert Scene({"A": EAST}, k={"A": ENTRY - 1}).withhold(gate, t=0) == {"A"} == _holders(gate)
+    for t, kb in enumerate(range(0, ENTRY), start=1):
+        # B's claim runs from 10 m behind its stop point to 1 m past its hold box: into the guard near the end
+        claim = ((-0.5, W[kb, 1] - 10.0), (3.7, W[kb, 1] + HOLD[0] + 1.0))
+        scene = Scene({"A": EAST, "B": NORTH}, k={"A": ENTRY, "B": kb}, idle="A", claims={"B": claim})
+        asked = scene.withhold(gate, t=t)
+        assert ("B" in asked) == (kb + 1 < ENTRY), kb
+    assert _holders(gate) == {"A"}
+
+
+def test_the_holder_moves_its_stop_point_through_to_the_exit_slot_and_on():
+    """With the token, A's stop point moves from before the entry line through the zone to its
+    exit slot and beyond, while B (crossing) waits at its entry line the whole time."""
+    gate = _gate()
+    for t, ka in enumerate(range(ENTRY - 1, EXIT + 5)):
+        # A's claim: from 5 m behind its stop point (still in the guard until x = 13.2) to its hold box
+        W = _route(*EAST)[0]
+        claim = (W[ka] - [5.0 + HOLD[0], HOLD[1]], W[ka] + HOLD)
+        scene = Scene({"A": EAST, "B": NORTH}, k={"A": ka, "B": ENTRY - 1}, claims={"A": claim})
+        asked = scene.withhold(gate, t=t)
+        assert "A" in asked and "B" not in asked, ka
+        assert _holders(gate) == {"A"}
+
+
+@pytest.mark.parametrize("gap_m, granted", [(-0.2, False), (0.2, True)])
+def test_exit_slot_needs_room_for_the_stopped_vehicle_only(gap_m, granted):
+    """A token needs room at the exit slot (x = 11) for A's hold box (±2.25 m), nothing more: L,
+    parked beyond it, claims from 0.2 m short of / past that box's front (13.25 m); 0.2 m past is
+    still inside the corridor's last box (11 + 2.75), which the paper's rule wanted free."""
+    x_front = 11.0 + HOLD[0]
+    assert x_front + 0.2 < 11.0 + 0.5 * CAR.delta + CAR.hold + 0.5 * CAR.length
+    lo_l = x_front + gap_m
+    gate = _gate()
+    scene = Scene({"A": EAST, "L": ((lo_l + HOLD[0], -1.6), (300.0, -1.6))}, k={"A": ENTRY - 1}, idle="L")
+    assert scene.withhold(gate) == ({"A"} if granted else set())
+    assert _holders(gate) == ({"A"} if granted else set())
+
+
+@pytest.mark.parametrize("room_m, follows", [(4.8, False), (5.2, True)])
+def test_a_queue_follows_its_leader_through_with_room_for_both(room_m, follows):
+    """F queues behind the holder A on the same lanes; their corridors meet.  F takes a token too
+    when the road from the exit slot on has room for both hold boxes: the hold boxes at the slot
+    and ceil((4 + 4) / 2 + 0.25 + 0.25) = 5 waypoints beyond it (front at 13.25 + 5 m) must miss
+    L's claim, which starts 4.8 m past the slot's front (A's hold box would fit, both not) or 5.2 m
+    past.  B, crossing, waits either way; F does not overtake a vehicle waiting
+    longer (next test)."""
+    front = 11.0 + HOLD[0]
+    lo_l = front + room_m
+    gate = _gate()
+    assert Scene({"A": EAST}, k={"A": ENTRY - 1}).withhold(gate, t=0) == {"A"}
+    W = _route(*EAST)[0]
+    claim_a = (W[ENTRY + 5] - HOLD, W[ENTRY + 5] + [20.0, HOLD[1]])  # A drives on: up to x = 16.25
+    vehicles = {"A": EAST, "F": EAST, "L": ((lo_l + HOLD[0], -1.6), (300.0, -1.6))}
+    scene = Scene(vehicles, k={"A": ENTRY + 5, "F": ENTRY - 1}, idle="L", claims={"A": claim_a})
+    asked = scene.withhold(gate, t=1)
+    assert asked == ({"A", "F"} if follows else {"A"})
+    assert _holders(gate) == ({"A", "F"} if follows else {"A"})
+    # B, crossing, arrives now: it waits for both
+    scene = Scene({**vehicles, "B": NORTH}, k={"A": ENTRY + 6, "F": ENTRY, "B": ENTRY - 1}, idle="L",
+                  claims={"A": claim_a})
+    assert "B" not in scene.withhold(gate, t=2)
+
+
+def test_a_follower_does_not_overtake_a_crossing_vehicle_waiting_longer():
+    gate = _gate()
+    assert Scene({"A": EAST}, k={"A": ENTRY - 1}).withhold(gate, t=0) == {"A"}
+    assert Scene({"A": EAST, "B": NORTH}, k={"A": ENTRY + 2, "B": ENTRY - 1}).withhold(gate, t=1) == {"A"}
+    scene = Scene({"A": EAST, "B": NORTH, "F": EAST}, k={"A": ENTRY + 5, "B": ENTRY - 1, "F": ENTRY - 1})
+    assert scene.withhold(gate, t=2) == {"A"} and _holders(gate) == {"A"}
+
+
+@pytest.mark.parametrize("pass_blocked", [True, False])
+def test_a_later_waiter_passes_a_blocked_one_only_off_its_path(pass_blocked):
+    """A holds the token; B (north) waits for it, first in order.  C, waiting less, clips the
+    guard's far corner (corridor apart from A's and B's): it takes a token -- it cannot delay B.
+    D (west) misses A's corridor but crosses B's: it waits behind B.  (Paper mode's rule, the
+    first blocked waiter ending the round: C waits too.)"""
+    C = ((-25.0, -11.0), (5.0, 19.0))
+    gate = _gate()
+    gate.pass_blocked = pass_blocked
+    k = {"A": ENTRY - 1, "B": ENTRY - 1}
+    assert Scene({"A": EAST, "B": NORTH}, k=k).withhold(gate, t=0) == {"A"}
+    scene = Scene({"A": EAST, "B": NORTH, "C": C, "D": WEST}, k={**k, "A": ENTRY + 2, "C": 20, "D": ENTRY - 1},
+                  idle="A")
+    fleet = scene.fleet()
+    corr = {v: gate.route_through(fleet, i, 0) for i, v in enumerate(scene.ids) if v != "A"}
+    a = gate.holders[0]["A"]
+    assert gate.intervals(fleet, 2)[1].tolist() == [21]  # C's next stop point enters its guard
+    assert not boxes_meet(corr["C"][2], corr["C"][3], a[1], a[2])
+    assert not boxes_meet(corr["C"][2], corr["C"][3], corr["B"][2], corr["B"][3])
+    assert boxes_meet(corr["D"][2], corr["D"][3], corr["B"][2], corr["B"][3])
+    assert not boxes_meet(corr["D"][2], corr["D"][3], a[1], a[2])
+    gate.wait[(0, "B")] = -1  # B has waited longest
+    asked = scene.withhold(gate, t=1)
+    assert asked == ({"C"} if pass_blocked else set()) and _holders(gate) == ({"A", "C"} if pass_blocked else {"A"})
+
+
+def test_token_released_when_every_claim_has_left_the_guard():
+    """A's stop point is past its exit slot; its claim (from its tail) still reaches 0.2 m into
+    the guard: A keeps the token and B waits.  0.2 m out: released, and B gets it in the same
+    round.  A vehicle gone releases its token too."""
+    gate = _gate()
+    assert Scene({"A": EAST, "B": NORTH}, k={"A": ENTRY - 1, "B": ENTRY - 1}).withhold(gate, t=0) == {"A"}
+    k_a = EXIT + 4  # x = 15
+    for t, (tail, held) in enumerate(((GUARD - 0.2, True), (GUARD + 0.2, False)), start=1):
+        claim = ((tail, -1.6 - HOLD[1]), (15.0 + HOLD[0], -1.6 + HOLD[1]))
+        scene = Scene({"A": EAST, "B": NORTH}, k={"A": k_a, "B": ENTRY - 1}, claims={"A": claim})
+        asked = scene.withhold(gate, t=t)
+        assert ("B" in asked) is not held and _holders(gate) == ({"A"} if held else {"B"})
+    gate = _gate()
+    assert Scene({"A": EAST, "B": NORTH}, k={"A": ENTRY - 1, "B": ENTRY - 1}).withhold(gate, t=0) == {"A"}
+    assert Scene({"B": NORTH}, k={"B": ENTRY - 1}).withhold(gate, t=1) == {"B"} == _holders(gate)
+
+
+def test_corridor_runs_from_the_stop_point_to_the_exit_slot_and_is_cached():
+    """Corridor boxes at every waypoint from the stop point to the exit slot (±2.75 along, ±1.1
+    across); the slot box is the hold box there; a route ending inside the guard has no slot."""
+    gate = _gate()
+    fleet = Scene({"A": EAST, "T": ((-30.0, -1.6), (0.0, -1.6))}, k={"A": ENTRY - 1, "T": ENTRY - 1}).fleet()
+    key, slot, lo, hi = gate.route_through(fleet, 0, 0)
+    assert key == ("A", 0, ENTRY - 1) and len(lo) == EXIT - ENTRY + 2
+    np.testing.assert_allclose(lo[0], [-11.0 - 2.75, -1.6 - 1.1], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(hi[-1], [11.0 + 2.75, -1.6 + 1.1], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(slot[0], [11.0 - HOLD[0], -1.6 - HOLD[1]], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(slot[1], [11.0 + HOLD[0], -1.6 + HOLD[1]], rtol=0, atol=1e-12)
+    assert gate.route_through(fleet, 0, 0)[2] is lo
+    _, slot, lo, _ = gate.route_through(fleet, 1, 0)
+    assert slot is None and len(lo) == 30 - (ENTRY - 1) + 1  # to its last waypoint, inside the guard
+
+
+def test_opposite_streams_hold_tokens_together_crossing_ones_do_not():
+    """Corridors are the hold regions along the path (±1.1 m across): opposite lanes 3.2 m apart
+    do not meet, so both streams cross at once; a crossing one waits."""
+    k = {v: ENTRY - 1 for v in "ABC"}
+    for paths, want in (({"A": EAST, "B": WEST}, {"A", "B"}), ({"A": EAST, "B": WEST, "C": NORTH}, {"A", "B"}),
+                        ({"A": NORTH, "B": SOUTH}, {"A", "B"}), ({"A": EAST, "C": NORTH}, {"A"})):
+        gate = _gate()
+        assert Scene(paths, k=k).withhold(gate) == want == _holders(gate), paths
+
+
+def test_a_token_given_back_at_a_red_is_needed_again_from_inside():
+    """A holds the token with its stop point inside the guard, then stands at a red light and
+    gives it back (tm.signals): its next request needs the token again; B, crossing and waiting
+    since before, gets it first (A's standing claim is not on B's route), and A waits."""
+    gate = _gate()
+    assert Scene({"A": EAST}, k={"A": ENTRY - 1}).withhold(gate, t=0) == {"A"}
+    assert Scene({"A": EAST, "B": NORTH}, k={"A": ENTRY + 3, "B": ENTRY - 1}).withhold(gate, t=1) == {"A"}
+    gate.give_back(["A"])
+    assert _holders(gate) == set() and gate.given_back == {"A": {0}}
+    gate.give_back([])  # the light turned green: A asks again
+    asked = Scene({"A": EAST, "B": NORTH}, k={"A": ENTRY + 3, "B": ENTRY - 1}).withhold(gate, t=2)
+    assert asked == {"B"} == _holders(gate)
+    gate = _gate()  # alone, A gets it back
+    assert Scene({"A": EAST}, k={"A": ENTRY - 1}).withhold(gate, t=0) == {"A"}
+    gate.give_back(["A"])
+    gate.give_back([])
+    assert Scene({"A": EAST}, k={"A": ENTRY + 3}).withhold(gate, t=1) == {"A"} == _holders(gate)
+    assert gate.given_back == {}
+
+
+def test_no_admission_into_a_holders_corridor():
+    gate = _gate()
+    fam, centre, heading = np.array(["car", "car"]), np.array([[0.0, -1.6], [0.0, 30.0]]), np.zeros(2)
+    assert gate.admissible(np.array([True, True]), fam, centre, heading).tolist() == [True, True]
+    assert Scene({"A": EAST}, k={"A": ENTRY - 1}).withhold(gate) == {"A"}
+    assert gate.admissible(np.array([True, True]), fam, centre, heading).tolist() == [False, True]
+
+
+@st.composite
+def fleets(draw):
+    n = draw(st.integers(1, 8))
+    rng = np.random.default_rng(draw(st.integers(0, 2**31 - 1)))
+    roads = [EAST, WEST, NORTH, SOUTH, ((-30.0, 1.6), (1.6, 60.0))]  # the last one turns left-ish
+    vehicles = {f"v{i}": roads[rng.integers(len(roads))] for i in range(n)}
+    k = {v: int(rng.integers(ENTRY - 8, ENTRY)) for v in vehicles}
+    idle = [v for v in vehicles if rng.random() < 0.3]
+    return vehicles, k, idle, int(draw(st.integers(1, 40)))
+
+
+@settings(max_examples=60, deadline=None)
+@given(fleets())
+def test_holders_corridors_never_meet_and_only_holders_stop_inside(case):
+    """Random fleets around one junction, each vehicle moving its stop point on by one waypoint a
+    round when its request stays (claims: its hold box): after every round the stored corridors of
+    two holders are apart unless both drive the same road (a queue through the junction), and
+    every stop point between an entry line and its exit slot is a holder's."""
+    vehicles, k, idle, rounds = case
+    gate = _gate()
+    for t in range(rounds):
+        scene = Scene(vehicles, k=k, idle=idle)
+        asked = scene.withhold(gate, t=t)
+        held = list(gate.holders[0].items())
+        for a in range(len(held)):
+            for b in range(a + 1, len(held)):
+                (va, (_, lo_a, hi_a)), (vb, (_, lo_b, hi_b)) = held[a], held[b]
+                assert vehicles[va] == vehicles[vb] or not boxes_meet(lo_a, hi_a, lo_b, hi_b), (va, vb)
+        k = {v: k[v] + (v in asked) for v in vehicles}
+        moved = Scene(vehicles, k=k)
+        for i, v in enumerate(moved.ids):
+            zs, e, x, _ = gate.intervals(moved.fleet(), i)
+            inside = bool(np.any((e <= k[v]) & (k[v] < x)))
+            assert not inside or v in gate.holders[0], (v, k[v])
+
+
+def test_bad_extents_are_named():
+    with pytest.raises(ValueError, match=r"AuthorityReach: extents must be finite and >= 0 m.*'across': -1.0"):
+        AuthorityReach(hold=0.2, hold_y=0.2, across=-1.0, length=4.0, width=1.8, delta=1.0)
+    with pytest.raises(ValueError, match=r"AuthorityReach: .*delta > 0"):
+        AuthorityReach(hold=0.2, hold_y=0.2, across=1.0, length=4.0, width=1.8, delta=0.0)

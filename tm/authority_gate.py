@@ -1,0 +1,290 @@
+"""The junction liveness layer for movement-authority vehicles (design.md §7, "Liveness with the
+new claims").
+
+In ``--controller authority`` mode a vehicle's current waypoint ``c`` is its stop point (its
+movement authority) and its claims ``S_k`` are reach-tightened: they run from where the vehicle is
+to a little past ``c`` and no longer reach backwards as the paper's centred sets do.  The tokens,
+waiting order, corridors and exit-slot room of :class:`tm.junctions.JunctionGate` stay; what
+changes is where they apply:
+
+* **guard**: the zone enlarged by the claims' across half-width (``max |y|`` over the across
+  factor's levels) plus half the footprint's diagonal, per class (:attr:`AuthorityReach.guard_reach`;
+  the gate's shared guard boxes, :meth:`AuthorityGate.guard_radius`, take the largest, and a
+  class's own guard is tested by shrinking its boxes by the difference);
+* **entry line**: without the zone's token a vehicle may not move its stop point to a waypoint
+  whose hold box ``T^0 ⊕ footprint`` meets the guard -- its stop point stays behind the guard's
+  edge less the ``T^0`` extent and ``L/2`` (:meth:`AuthorityGate.intervals`);
+* **exit slot**: the first waypoint after the entry whose hold box misses the guard again.  With
+  the token the stop point may move up to it (and on, outside the guard, without one); the token
+  is handed out only with room there for the stopped vehicle: no other vehicle's claim on the
+  slot's hold box;
+* **corridor**: what the vehicle can hold while its stop point moves from where it is to the
+  exit slot: boxes around those waypoints, ``δ/2 + T^0`` along plus ``L/2`` (a position lies
+  within ``δ/2`` of a waypoint), ``T^0`` plus ``W/2`` across.  Across, this is the hold region,
+  not the moving claims' half-width: two holders' moving claims are time-indexed and the traffic
+  manager lets one pass the other (opposite or parallel lanes); what can block a holder for ever
+  is another one stopped in its path.  (With the moving claims' width, ``max |y|`` of every level
+  plus ``W/2``, adjacent lanes' corridors meet: on ``grid``, 300 s, seeds 1 / 2: 88 / 77 of 150
+  arrived, against 104 / 97 with this width.);
+* **release**: when every ``S_k`` (the bounding box of their union) has left its class's guard;
+* **queues** (:meth:`AuthorityGate._follows`): a vehicle on the same lanes behind a holder takes a
+  token too when the exit road has room for all of them; and a later waiter passes one that a
+  holder blocks when its corridor misses that one's (``pass_blocked``: it cannot delay it).
+
+Pure numpy, no simulator; safety stays with the traffic manager, which checks every request.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from controllers.authority import AuthorityTables
+from tm.junctions import JunctionFleet, JunctionGate
+
+__all__ = ["AuthorityReach", "AuthorityGate"]
+
+
+def _world_half(a: float, b: float, *headings: np.ndarray) -> np.ndarray:
+    """Half extents (n, 2) of the world bounding box of a segment-frame box ``±a`` along, ``±b``
+    across, hulled over the given headings (a waypoint's arriving and leaving segments)."""
+    out = None
+    for h in headings:
+        c, s = np.abs(np.cos(h))[:, None], np.abs(np.sin(h))[:, None]
+        e = np.hstack([c * a + s * b, s * a + c * b])
+        out = e if out is None else np.maximum(out, e)
+    return out
+
+
+@dataclass(frozen=True, eq=False)
+class AuthorityReach:
+    """What the junction layer needs of a movement-authority class (metres).
+
+    Parameters
+    ----------
+    hold, hold_y : float
+        Half extents of ``T^0``'s position along and across the road (the vehicle at rest at its
+        stop point lies in ``T^0``).
+    across : float
+        The claims' across half-width: ``max |y|`` over every level's across range (a claim lies
+        inside ``T^m``, so inside it).
+    length, width : float
+        Footprint.
+    delta : float
+        Largest gap between consecutive waypoints.
+    """
+
+    hold: float
+    hold_y: float
+    across: float
+    length: float
+    width: float
+    delta: float
+
+    def __post_init__(self) -> None:
+        vals = dict(hold=self.hold, hold_y=self.hold_y, across=self.across, length=self.length,
+                    width=self.width, delta=self.delta)
+        bad = {k: v for k, v in vals.items() if not (np.isfinite(v) and v >= 0)}
+        if bad or not (self.length > 0 and self.width > 0 and self.delta > 0):
+            raise ValueError(f"AuthorityReach: extents must be finite and >= 0 m, length, width and delta > 0; "
+                             f"got {vals}")
+
+    @staticmethod
+    def of(tables: AuthorityTables, length: float, width: float, delta: float) -> AuthorityReach:
+        """From a movement-authority family's tables (:func:`controllers.authority.build_tables`)."""
+        return AuthorityReach(hold=float(max(-tables.p_lo[0], tables.p_hi[0])),
+                              hold_y=float(max(-tables.y_lo[0], tables.y_hi[0])),
+                              across=float(max(-tables.y_lo.min(), tables.y_hi.max())),
+                              length=float(length), width=float(width), delta=float(delta))
+
+    @property
+    def guard_reach(self) -> float:
+        """How far this class's claims stick out of a zone its route crosses: the across
+        half-width plus half the footprint's diagonal (the body turns inside the junction)."""
+        return self.across + 0.5 * float(np.hypot(self.length, self.width))
+
+    def hold_half(self, *headings: np.ndarray) -> np.ndarray:
+        """World half extents (n, 2) of the hold box ``T^0 ⊕ footprint`` at the headings."""
+        return _world_half(self.hold + 0.5 * self.length, self.hold_y + 0.5 * self.width, *headings)
+
+    def half_extent(self, *headings: np.ndarray) -> np.ndarray:
+        """World half extents (n, 2) of a corridor box around a waypoint at the headings: the hold
+        box ``T^0 ⊕ footprint`` of every stop point within ``δ/2`` of it (module notes)."""
+        return _world_half(0.5 * self.delta + self.hold + 0.5 * self.length, self.hold_y + 0.5 * self.width,
+                           *headings)
+
+
+class AuthorityGate(JunctionGate):
+    """:class:`tm.junctions.JunctionGate` with the movement-authority rules (module notes).
+
+    Parameters
+    ----------
+    zones : list of Zone
+    classes : mapping of str to AuthorityReach
+        Every class a fleet row may name.
+
+    The fleet's ``claim_lo``, ``claim_hi`` are the world bounding boxes of every vehicle's
+    ``∪_k S_k`` (:func:`tm.reach.world_aabb`); :meth:`withhold` ignores the new claims' boxes
+    (the rules are on the stop points).
+    """
+
+    pass_blocked = True
+
+    def __init__(self, zones, classes: dict):
+        super().__init__(zones, classes)
+        #: vehicle id -> its route's intervals through the guards (:meth:`intervals`)
+        self._spans: dict[str, tuple] = {}
+        #: per class: how much smaller than the shared guard its own guard is (m)
+        radius = self.guard_radius(self.classes.values())
+        self._shrink = {c: radius - r.guard_reach for c, r in self.classes.items()}
+        self._family: np.ndarray | None = None  # the fleet's classes during :meth:`withhold`
+
+    def withhold(self, t: int, fleet: JunctionFleet, requesting: np.ndarray, new_lo: np.ndarray,
+                 new_hi: np.ndarray) -> np.ndarray:
+        """As :meth:`tm.junctions.JunctionGate.withhold`; ``new_lo``, ``new_hi`` are not used."""
+        self._family = fleet.family
+        try:
+            return super().withhold(t, fleet, requesting, new_lo, new_hi)
+        finally:
+            self._family = None
+
+    def _release(self, pos: dict, cur_lo: np.ndarray, cur_hi: np.ndarray) -> None:
+        """Release the tokens of holders gone or whose claims (every ``S_k``) have left their
+        class's guard (the zone plus that class's :attr:`AuthorityReach.guard_reach`)."""
+        if self._family is None or not len(cur_lo):
+            return super()._release(pos, cur_lo, cur_hi)
+        d = np.array([self._shrink[c] for c in self._family.tolist()])[:, None]
+        super()._release(pos, cur_lo + d, cur_hi - d)  # a box shrunk by d against the guard
+
+    @staticmethod
+    def guard_radius(classes) -> float:
+        """The largest :attr:`AuthorityReach.guard_reach` of the classes (m)."""
+        return max((c.guard_reach for c in classes), default=0.0)
+
+    def intervals(self, fleet: JunctionFleet, row: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """``(zone, entry, exit, exits)``: the runs of waypoints of row ``row``'s route whose hold
+        box (``T^0 ⊕ footprint`` at the arriving and leaving headings) meets a zone's guard.
+
+        ``entry`` is the first waypoint of a run (the stop point may move there only with the
+        zone's token), ``exit`` the first after it whose hold box misses the guard (the exit
+        slot), or the last waypoint when the route ends inside the guard (``exits`` False).
+        Cached per vehicle: they depend on its route only."""
+        vid = fleet.ids[row]
+        found = self._spans.get(vid)
+        if found is not None:
+            return found
+        W, H, _ = fleet.route(row)
+        c = fleet.family[row]
+        half = self.classes[c].hold_half(H, np.r_[H[1:], H[-1:]]) - self._shrink[c]  # its class's guard
+        i, z = self.guards.pairs(W - half, W + half)
+        o = np.lexsort((i, z))
+        i, z = i[o], z[o]
+        run = np.r_[True, (z[1:] != z[:-1]) | (i[1:] != i[:-1] + 1)] if len(i) else np.zeros(0, dtype=bool)
+        starts = np.flatnonzero(run)
+        last = i[np.r_[starts[1:], len(i)] - 1] if len(i) else np.zeros(0, dtype=np.intp)
+        exits = last + 1 < len(W)
+        found = self._spans[vid] = (z[starts], i[starts], np.where(exits, last + 1, len(W) - 1), exits)
+        return found
+
+    def _span_of(self, fleet: JunctionFleet, row: int, z: int, target: int):
+        """``(entry, exit, exits)`` of zone ``z``'s interval holding waypoint ``target``, or None."""
+        zs, e, x, ex = self.intervals(fleet, row)
+        hit = np.flatnonzero((zs == z) & (e <= target) & (target <= x))
+        return None if not len(hit) else (int(e[hit[0]]), int(x[hit[0]]), bool(ex[hit[0]]))
+
+    def _wanting(self, fleet: JunctionFleet, r: np.ndarray, new_lo: np.ndarray,
+                 new_hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(zone, row)`` pairs of requesters ``r`` that need the zone's token unless they hold it,
+        grouped by zone, rows ascending: the requested stop point ``k + 1`` lies in one of the
+        zone's intervals (entry to exit slot) and the current one does not, or the vehicle gave
+        the zone's token back (:meth:`give_back`)."""
+        ids = fleet.ids
+        if len(self._spans) > 4 * len(ids) + 1000:  # vehicles gone: drop their routes
+            live = set(ids)
+            self._spans = {v: sp for v, sp in self._spans.items() if v in live}
+        spans = [self.intervals(fleet, i) for i in r.tolist()]  # cached per vehicle
+        cnt = np.array([len(sp[0]) for sp in spans], dtype=np.intp)
+        if not cnt.sum():
+            return np.zeros(0, dtype=np.intp), np.zeros(0, dtype=np.intp)
+        z, e, x = (np.concatenate([sp[j] for sp in spans]).astype(np.intp) for j in range(3))
+        row = np.repeat(r, cnt)
+        k = np.concatenate([np.asarray(kk, dtype=np.intp) for _, _, kk in fleet.parts])[row]
+        on = (e <= k + 1) & (k + 1 <= x)
+        fresh = on & (k < e)
+        if self.given_back:  # a token given back is needed again, from inside the guard too
+            fresh |= on & np.array([zz in self.given_back.get(ids[i], ()) for i, zz in zip(row.tolist(), z.tolist())],
+                                   dtype=bool).reshape(-1)
+        o = np.lexsort((row[fresh], z[fresh]))
+        return z[fresh][o], row[fresh][o]
+
+    def _path(self, fleet: JunctionFleet, row: int, z: int) -> np.ndarray | None:
+        """Waypoints (m, 2) of row ``row``'s route from zone ``z``'s entry to its exit slot, for the
+        interval holding its stop point or the next one (None if neither lies in one)."""
+        W, _, k = fleet.route(row)
+        span = self._span_of(fleet, row, z, k + 1) or self._span_of(fleet, row, z, k)
+        return None if span is None else W[span[0]:span[1] + 1]
+
+    def _follows(self, fleet: JunctionFleet, pos: dict, row: int, z: int, leaders: list) -> bool:
+        """A queue through the junction: row ``row`` may take zone ``z``'s token although its
+        corridor meets the holders ``leaders``' (or their claims fill its exit slot) when each of
+        them drives the same path through the zone (every waypoint of its path from entry to exit
+        slot within ``0.6 δ`` of theirs: the same lanes) ahead of it, and the road from its exit
+        slot on has room for them all and for it: the hold boxes at the waypoints from the slot
+        over ``sum_j ceil(((L_j + L) / 2 + hold_j + hold) / δ)`` more meet no claim but theirs.
+        Then none of them can stop inside the guard: nobody else enters that road but through this
+        zone's exit slot, which every other candidate's corridor meets."""
+        W, H, k = fleet.route(row)
+        span = self._span_of(fleet, row, z, k + 1)
+        if span is None or not span[2]:
+            return False
+        cls = self.classes[fleet.family[row]]
+        mine = W[span[0]:span[1] + 1]
+        tol = 0.6 * cls.delta
+        rows, m = [], 0
+        for h in leaders:
+            j = pos.get(h)
+            theirs = None if j is None else self._path(fleet, j, z)
+            if theirs is None or len(theirs) == 0:
+                return False
+            d = np.linalg.norm(mine[:, None, :] - theirs[None, :, :], axis=2).min(axis=1)
+            if d.max() > tol:
+                return False
+            c = self.classes[fleet.family[j]]
+            rows.append(j)
+            m += int(np.ceil((0.5 * (c.length + cls.length) + c.hold + cls.hold) / cls.delta))
+        x = span[1]
+        idx = np.arange(x, min(x + m, len(W) - 1) + 1)
+        half = cls.hold_half(H[idx], H[np.minimum(idx + 1, len(H) - 1)])
+        lo, hi = W[idx] - half, W[idx] + half
+        near = np.flatnonzero(np.all((fleet.claim_lo <= hi.max(axis=0)) & (fleet.claim_hi >= lo.min(axis=0)), axis=1))
+        near = near[~np.isin(near, [row] + rows)]  # the queue's own claims do not count
+        c_lo, c_hi = fleet.claim_lo[near], fleet.claim_hi[near]
+        return not np.any(np.all((lo[:, None, :] <= c_hi[None]) & (hi[:, None, :] >= c_lo[None]), axis=2))
+
+    def route_through(self, fleet: JunctionFleet, row: int, z: int):
+        """``(key, slot, lo, hi)``: exit slot and corridor of row ``row`` through zone ``z``'s guard.
+
+        The corridor holds a box around every waypoint from the current one ``k`` to the exit
+        slot (:meth:`AuthorityReach.half_extent`); the slot box is the hold box ``T^0 ⊕
+        footprint`` at the exit slot (room for the stopped vehicle only: the claims no longer
+        reach backwards), None when the route ends inside the guard.  Cached per (vehicle, zone,
+        current waypoint)."""
+        W, H, k = fleet.route(row)
+        key = (fleet.ids[row], z, k)
+        found = self._routes.get(key)
+        if found is not None:
+            return found
+        cls = self.classes[fleet.family[row]]
+        span = self._span_of(fleet, row, z, k + 1)
+        last, exits = (span[1], span[2]) if span is not None else (min(k + 1, len(W) - 1), False)
+        idx = np.arange(k, last + 1)
+        nxt = np.minimum(idx + 1, len(H) - 1)
+        r1 = cls.half_extent(H[idx], H[nxt])
+        corr_lo, corr_hi = W[idx] - r1, W[idx] + r1
+        slot = None
+        if exits:
+            h = cls.hold_half(H[last:last + 1], H[nxt[-1]:nxt[-1] + 1])[0]
+            slot = (W[last] - h, W[last] + h)
+        self._routes[key] = found = (key, slot, corr_lo, corr_hi)
+        return found
