@@ -17,6 +17,14 @@ some pedestrian ``p``
 * ``G`` is within ``reach_k = r + j + v (k + lag) Ts`` of ``p``, and
 * ``S_k`` is within ``reach_k`` of ``p``.
 
+Authority mode (:meth:`PedestrianRule.withhold_reach`): the same three tests on the
+reach-tightened boxes ``S_k`` of :mod:`tm.reach` (slot ``k``: where the footprint can be at step
+``t + k``), for ``k = 1 .. min(max(l, 1) + hold_steps, K)``: the steps by which the tube has brought
+the vehicle into ``T^0`` at its stop point, as in paper mode (``K`` slots; empty boxes meet
+nothing).  Time-indexed: a box that meets a walking region only at step ``k`` is tested against
+the ``k``-step reach, not the whole horizon's, and it is sound because ``S_k`` bounds where the
+vehicle can be at step ``k``.
+
 The three tests are implied by "``S_k ∩ G`` is within ``reach_k`` of ``p``",
 so the rule withholds at least whenever that exact condition holds: sound
 (and somewhat conservative).  ``lag`` covers positions read one simulator
@@ -28,10 +36,16 @@ requests, so the vehicles' own invariant ("deny all keeps the claims
 disjoint") is untouched.
 
 What it covers: at grant time no pedestrian can reach, within the claim's
-horizon, a walking region where the claim's polygon at that step lies.  What
-it does not: a pedestrian who walks in later onto a region that a vehicle's
-*held* claim (its hold region ``S_K``, kept while its requests are denied)
-covers -- muvsim cannot stop SUMO's pedestrians.  :func:`footprint_contacts`
+horizon, a walking region where the claim's polygon at that step lies.  A
+denied request keeps the vehicle's current claim, granted earlier under the
+same test: it can still stop inside it (the tube), and since a claim not
+granted only shrinks (``S_k(t+1) ⊆ S_{k+1}(t)`` in authority mode, ``P^{l-k}``
+in paper mode) the grant-time test keeps covering it up to that claim's
+horizon.  What it does not: a pedestrian who walks in later onto a region
+that a vehicle's *held* claim (its hold region: ``P^0``, or ``T^0`` at the
+stop point in authority mode, kept while its requests are denied) covers,
+after that horizon -- muvsim cannot stop SUMO's pedestrians, and they do not
+yield to vehicles moved by ``moveToXY``.  :func:`footprint_contacts`
 measures that (the ``pedestrian_conflicts`` counter).
 """
 
