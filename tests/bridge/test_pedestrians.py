@@ -348,3 +348,32 @@ def test_authority_mode_the_pedestrian_rule_and_the_tm_share_the_requests_reach_
         per_step.append(sum(1 for a in calls if a))      # calls for requests (with a FleetState argument)
     assert max(per_step) == 1 and sum(per_step) > 50
     assert sim.pedestrian_withheld > 0 and sim.records["car"].arrived_s is not None
+
+
+def test_a_person_riding_a_vehicle_is_no_pedestrian(ped_cfg, tmp_path):
+    """SUMO gives a rider its vehicle's position: read_persons leaves riders out (they met their own
+    vehicle's footprint: pedestrian_conflicts fired on tools/game/rail), walkers stay in."""
+    import libsumo
+
+    from bridge.sumo_pedestrians import read_persons
+
+    (tmp_path / "r.rou.xml").write_text(
+        '<routes><vType id="car" vClass="passenger" length="5" width="1.8"/>'
+        '<vehicle id="c" type="car" depart="triggered"><route edges="WC CE"/></vehicle>'
+        '<person id="rider" depart="0"><ride from="WC" to="CE" lines="c"/></person>'
+        '<person id="walker" depart="0"><walk from="NC" to="CS"/></person></routes>')
+    libsumo.start(["sumo", "-n", str(ped_cfg.parent / "n.net.xml"), "-r", str(tmp_path / "r.rou.xml"),
+                   "--step-length", "0.1", "--no-step-log", "true", "--no-warnings", "true"])
+    try:
+        riding = 0
+        for _ in range(100):
+            libsumo.simulationStep()
+            ids, xy = read_persons(libsumo)
+            assert "rider" not in ids or not libsumo.person.getVehicle("rider")
+            assert "walker" in ids and xy.shape == (len(ids), 2)
+            if "rider" in libsumo.person.getIDList() and libsumo.person.getVehicle("rider") == "c":
+                riding += 1
+                assert np.allclose(libsumo.person.getPosition("rider"), libsumo.vehicle.getPosition("c"), atol=5.0)
+    finally:
+        libsumo.close()
+    assert riding > 50           # the rider was in the car for most of the window: the filter was needed
