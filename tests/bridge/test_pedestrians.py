@@ -377,3 +377,25 @@ def test_a_person_riding_a_vehicle_is_no_pedestrian(ped_cfg, tmp_path):
     finally:
         libsumo.close()
     assert riding > 50           # the rider was in the car for most of the window: the filter was needed
+
+
+@pytest.mark.parametrize("controller", ["paper", "authority"])
+@pytest.mark.parametrize("enabled", [True, False])
+def test_admission_waits_while_a_pedestrian_stands_where_the_car_would_appear(controller, enabled):
+    """A car whose first waypoint is 2 m before the crossing (its footprint reaches x = 28.5, the
+    crossing starts at x = 28) is not admitted while the pedestrian stands on it (until 5 s), with
+    either controller; with the rule off it appears at once and meets the pedestrian."""
+    vc = CLASSES["car"]
+    spec = VehicleSpec(id="car", vclass="car", waypoints=subsample(np.array([[26.0, 0.0], [60.0, 0.0]]),
+                                                                  vc.model.delta))
+    s = CosimSettings(disturbance="none", controller=controller)
+    rule = PedestrianRule(PedestrianSettings(enabled=enabled), [CROSSING], s.Ts)
+    sim = Cosim(CLASSES, [spec], s, world=StandingPedestrian(5.0), pedestrians=rule)
+    sim.run(400)
+    rec = sim.records["car"]
+    if enabled:
+        assert rec.admitted_s is not None and rec.admitted_s >= 5.0
+        assert sim.pedestrian_withheld > 0 and sim.pedestrian_conflicts == set()
+        assert rec.arrived_s is not None
+    else:
+        assert rec.admitted_s == 0.0 and sim.pedestrian_conflicts == {("car", "p")}
