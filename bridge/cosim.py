@@ -176,6 +176,8 @@ class Cosim:
         self.pedestrians = pedestrians
         self.pedestrian_conflicts: set = set()  # unique (vehicle, person) footprint-body contacts
         self.pedestrian_withheld = 0            # requests and admissions withheld for pedestrians
+        #: this step's claims of its requests, computed once (:meth:`_request_claims`, :meth:`_requested_reach`)
+        self._req_cache: tuple | None = None
         #: Objects with ``on_step(sim, state, decision, row)``, called at the end of every
         #: step (``state``: the FleetState the TM decided on, or None with no vehicle;
         #: ``decision``: the TM's Decision or None; ``row``: the step's KPI row).
@@ -387,11 +389,11 @@ class Cosim:
         if not len(peds):
             return state
         self._ped_speed()
-        cur = self.tm.claims(state)
         r = np.flatnonzero(state.requesting)
-        new = Claims(cur.table, cur.family[r], state.req_centre[r], state.req_index[r], state.req_heading[r],
-                     cur.length[r], cur.width[r])
-        stop = self.pedestrians.withhold(new, peds)
+        if self.authority:  # reach claims, slot k against the pedestrians' k-step reach (tm.pedestrians)
+            stop = self.pedestrians.withhold_reach(self._requested_reach(state), state.req_index[r], peds)
+        else:
+            stop = self.pedestrians.withhold(self._request_claims(state)[2], peds)
         if not stop.any():
             return state
         self.pedestrian_withheld += int(stop.sum())
@@ -437,12 +439,11 @@ class Cosim:
             cur_lo, cur_hi = world_aabb(self._claims_now)
             new_lo = new_hi = np.zeros((len(r), 2))
         else:
-            cur = self.tm.claims(state)
+            cur, r, new = self._request_claims(state)
             cur_lo, cur_hi = cur.aabb()
             new_lo = new_hi = np.zeros((0, 2))
             if len(r):
-                new_lo, new_hi = Claims(cur.table, cur.family[r], state.req_centre[r], state.req_index[r],
-                                        state.req_heading[r], cur.length[r], cur.width[r]).aabb()
+                new_lo, new_hi = new.aabb()
         fleet = JunctionFleet(state.ids, state.family, cur_lo, cur_hi,
                               tuple((g.W, g.H, g.k) for g in self.groups.values() if g.ids))
         req = self.junctions.withhold(self.t, fleet, state.requesting, new_lo, new_hi)
@@ -467,8 +468,36 @@ class Cosim:
             o += len(g.ids)
         return self.reach.claims(parts)
 
-    def _entry_claims(self, ready: list[VehicleSpec], cand: FleetState) -> ReachClaims:
-        """Reach claims of the ready vehicles at rest on their first waypoints (in ``ready``'s order)."""
+    def _cached_requests(self, state: FleetState, kind: str, build):
+        """``(r, claims of rows r, extra)`` for this step's requesters ``r``; ``build(state) -> (claims of
+        state's requesters, extra)`` runs for the first state of the step asked about, later states take
+        their rows from it (within a step the fleet is the same and requests are only ever withheld:
+        signals, junction tokens, pedestrians)."""
+        r = np.flatnonzero(state.requesting)
+        c = self._req_cache
+        if c is None or (c[0], c[2]) != (self.t, kind) or c[1] is not state.ids or not np.isin(r, c[3]).all():
+            c = self._req_cache = (self.t, state.ids, kind, r, *build(state))
+        return r, c[4].take(np.searchsorted(c[3], r)), c[5]
+
+    def _request_claims(self, state: FleetState) -> tuple[Claims, np.ndarray, Claims]:
+        """Paper mode: the fleet's current claims, the requesters ``r`` and the claims of their
+        requests (once per step: the junction gate and the pedestrian rule share them)."""
+        def build(st):
+            cur = self.tm.claims(st)
+            q = np.flatnonzero(st.requesting)
+            return Claims(cur.table, cur.family[q], st.req_centre[q], st.req_index[q], st.req_heading[q],
+                          cur.length[q], cur.width[q]), cur
+        r, new, cur = self._cached_requests(state, "paper", build)
+        return cur, r, new
+
+    def _requested_reach(self, state: FleetState) -> ReachClaims:
+        """Authority mode: reach claims of the requesters for their requested waypoints, in fleet order
+        (once per step: the pedestrian rule and the TM's decision share them)."""
+        return self._cached_requests(state, "reach", lambda st: (self._reach_claims(st), None))[1]
+
+    def _entry_claims(self, ready: list[VehicleSpec], cand: FleetState, with_index: bool = False):
+        """Reach claims of the ready vehicles at rest on their first waypoints (in ``ready``'s order);
+        with ``with_index``: also their membership indices."""
         parts, rows = [], []
         for c in self.groups:
             idx = np.flatnonzero(cand.family == c)
@@ -480,7 +509,8 @@ class Cosim:
                 rows.append(idx)
         inv = np.empty(len(ready), dtype=np.intp)
         inv[np.concatenate(rows)] = np.arange(len(ready))
-        return self.reach.claims(parts).take(inv)
+        out = self.reach.claims(parts).take(inv)
+        return (out, np.concatenate([p[4] for p in parts])[inv]) if with_index else out
 
     # -------------------------------------------------------------- one step
     def step(self) -> dict:
@@ -496,7 +526,7 @@ class Cosim:
         if state is not None:
             # 2. TM: Go/Stop for every request
             td = time.perf_counter()
-            dec = self.tm.decide_reach(state, self._claims_now, self._reach_claims(state)) \
+            dec = self.tm.decide_reach(state, self._claims_now, self._requested_reach(state)) \
                 if self.authority else self.tm.decide(state)
             ms_decide = (time.perf_counter() - td) * 1e3
             self.last_decision = dec
@@ -639,7 +669,8 @@ class Cosim:
             pos = np.vstack([g.X[:, :2] for g in self.groups.values() if g.ids]) if now is not None else None
             now = ReachClaims.concat(now, footprint_claims(pos, cur.heading, cur.length, cur.width)) \
                 if now is not None else footprint_claims(np.zeros((0, 2)), [], [], [])
-            ok = admit_reach(now, self._entry_claims(ready, cand), self.settings.tm.check)
+            entry = self._entry_claims(ready, cand, with_index=True)
+            ok = admit_reach(now, entry[0], self.settings.tm.check)
         else:
             ok = self.tm.admit(cur, cand)
         # nor into a junction token holder's corridor (tm.junctions)
@@ -648,7 +679,8 @@ class Cosim:
             peds = self._peds()[1]
             if len(peds):
                 self._ped_speed()
-                stop = ok & self.pedestrians.withhold(self.tm.claims(cand), peds)
+                stop = ok & (self.pedestrians.withhold_reach(*entry, peds) if self.authority
+                             else self.pedestrians.withhold(self.tm.claims(cand), peds))
                 self.pedestrian_withheld += int(stop.sum())
                 ok = ok & ~stop
         n = 0

@@ -130,8 +130,10 @@ def walk_regions(net_path, margin_m: float = WALK_MARGIN_M) -> list[np.ndarray]:
 
 
 def read_persons(api) -> tuple[list[str], np.ndarray]:
-    """Ids and positions ``(P, 2)`` of every person in the simulation (libsumo or traci ``api``)."""
-    ids = list(api.person.getIDList())
+    """Ids and positions ``(P, 2)`` of every person in the simulation (libsumo or traci ``api``) who is
+    not inside a vehicle: a rider's position is its vehicle's (SUMO), so it is no pedestrian (it
+    would meet its own vehicle's footprint)."""
+    ids = [p for p in api.person.getIDList() if not api.person.getVehicle(p)]
     if not ids:
         return ids, np.zeros((0, 2))
     get = api.person.getPosition

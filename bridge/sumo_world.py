@@ -349,11 +349,6 @@ def run_sumo(target: str, out: Path, opts) -> dict:
         peds = PedestrianRule(PedestrianSettings(enabled=getattr(opts, "pedestrians", None) != "ignore"),
                               walk_regions(net), settings.Ts)
         summary["options"]["pedestrians"] = "guard" if peds.settings.enabled else "ignore"
-        if settings.controller == "authority" and peds.settings.enabled and len(peds.regions):
-            raise ScenarioError(
-                f"{target}: the network has pedestrian crossings or walking areas, and --controller authority "
-                f"has no pedestrian guard yet (tm/pedestrians.py checks the paper mode's claims, not the "
-                f"reach-tightened ones); run with --controller paper, or add --pedestrians ignore")
         sim = Cosim(classes, specs, settings, world=world, zones=junction_zones(net), observers=observers,
                     pedestrians=peds)
         bar = None

@@ -17,6 +17,14 @@ some pedestrian ``p``
 * ``G`` is within ``reach_k = r + j + v (k + lag) Ts`` of ``p``, and
 * ``S_k`` is within ``reach_k`` of ``p``.
 
+Authority mode (:meth:`PedestrianRule.withhold_reach`): the same three tests on the
+reach-tightened boxes ``S_k`` of :mod:`tm.reach` (slot ``k``: where the footprint can be at step
+``t + k``), for ``k = 1 .. min(max(l, 1) + hold_steps, K)``: the steps by which the tube has brought
+the vehicle into ``T^0`` at its stop point, as in paper mode (``K`` slots; empty boxes meet
+nothing).  Time-indexed: a box that meets a walking region only at step ``k`` is tested against
+the ``k``-step reach, not the whole horizon's, and it is sound because ``S_k`` bounds where the
+vehicle can be at step ``k``.
+
 The three tests are implied by "``S_k ∩ G`` is within ``reach_k`` of ``p``",
 so the rule withholds at least whenever that exact condition holds: sound
 (and somewhat conservative).  ``lag`` covers positions read one simulator
@@ -28,10 +36,16 @@ requests, so the vehicles' own invariant ("deny all keeps the claims
 disjoint") is untouched.
 
 What it covers: at grant time no pedestrian can reach, within the claim's
-horizon, a walking region where the claim's polygon at that step lies.  What
-it does not: a pedestrian who walks in later onto a region that a vehicle's
-*held* claim (its hold region ``S_K``, kept while its requests are denied)
-covers -- muvsim cannot stop SUMO's pedestrians.  :func:`footprint_contacts`
+horizon, a walking region where the claim's polygon at that step lies.  A
+denied request keeps the vehicle's current claim, granted earlier under the
+same test: it can still stop inside it (the tube), and since a claim not
+granted only shrinks (``S_k(t+1) ⊆ S_{k+1}(t)`` in authority mode, ``P^{l-k}``
+in paper mode) the grant-time test keeps covering it up to that claim's
+horizon.  What it does not: a pedestrian who walks in later onto a region
+that a vehicle's *held* claim (its hold region: ``P^0``, or ``T^0`` at the
+stop point in authority mode, kept while its requests are denied) covers,
+after that horizon -- muvsim cannot stop SUMO's pedestrians, and they do not
+yield to vehicles moved by ``moveToXY``.  :func:`footprint_contacts`
 measures that (the ``pedestrian_conflicts`` counter).
 """
 
@@ -45,6 +59,7 @@ import numpy as np
 from controllers.tolerances import GEOMETRY_TOL
 from tm.claims import Claims
 from tm.geometry import convex_hull, intersect_sat, rectangles
+from tm.reach import ReachClaims, world_aabb
 
 __all__ = ["PedestrianSettings", "PedestrianRule", "footprint_contacts", "point_polygon_distance",
            "SUMO_PED_SPEED_BOUND", "STRIPING_SPEED_FACTOR"]
@@ -172,7 +187,7 @@ class PedestrianRule:
         return np.maximum(np.asarray(index), 1) + self.hold_steps
 
     def withhold(self, claims: Claims, peds: np.ndarray) -> np.ndarray:
-        """Which of the (new) ``claims`` must not be granted, given pedestrians at ``peds``.
+        """Which of the (new, paper-mode) ``claims`` must not be granted, given pedestrians at ``peds``.
 
         Parameters
         ----------
@@ -185,12 +200,54 @@ class PedestrianRule:
         -------
         ndarray of bool, shape (len(claims),)
         """
+        if self._idle(len(claims), peds):
+            return np.zeros(len(claims), dtype=bool)
+        lo, hi = claims.aabb()
+        return self._withhold(self.horizon(claims.index), lo, hi,
+                              lambda k, idx: (claims.polygons_at(k, idx), np.ones(len(idx), dtype=bool)), peds)
+
+    def withhold_reach(self, claims: ReachClaims, index, peds: np.ndarray) -> np.ndarray:
+        """Which of the (new) reach-tightened claims (authority mode, :mod:`tm.reach`) must not be granted.
+
+        The same rule as :meth:`withhold`, on the boxes ``S_k`` (slot ``k``: where the vehicle's
+        footprint can be at step ``t + k``) for ``k = 1 .. min(max(l, 1) + hold_steps, K)`` with ``l``
+        the claim's index (the step by which the tube has reached ``T^0``, as in paper mode) and ``K``
+        the claims' slots.  Empty boxes meet nothing.
+
+        Parameters
+        ----------
+        claims : ReachClaims
+            The claims the requests would make (one per request).
+        index : ndarray of int, shape (len(claims),)
+            Their membership indices (``l``, at most the class's ``N``).
+        peds : ndarray, shape (P, 2)
+            Pedestrians' positions (m).
+
+        Returns
+        -------
+        ndarray of bool, shape (len(claims),)
+        """
         n = len(claims)
+        index = np.asarray(index, dtype=np.intp).reshape(-1)
+        if len(index) != n:
+            raise ValueError(f"withhold_reach: {n} claims but {len(index)} indices")
+        if self._idle(n, peds):
+            return np.zeros(n, dtype=bool)
+        K = np.minimum(self.horizon(index), claims.lo.shape[1])
+        lo, hi = world_aabb(claims)
+        return self._withhold(K, lo, hi, lambda k, idx: _reach_boxes(claims, k, idx), peds)
+
+    def _idle(self, n: int, peds) -> bool:
+        """Nothing to check: rule off, no claim, no pedestrian or no walking region."""
+        return (not self.settings.enabled or n == 0 or len(np.asarray(peds).reshape(-1, 2)) == 0
+                or len(self.regions) == 0)
+
+    def _withhold(self, K: np.ndarray, lo: np.ndarray, hi: np.ndarray, polygons_at, peds) -> np.ndarray:
+        """The rule on claims with horizons ``K (n,)``, world boxes ``lo, hi (n, 2)`` containing every
+        ``S_k``, and ``polygons_at(k, idx) -> (S (c, m, 2) CCW convex, nonempty (c,))``."""
+        n = len(K)
         out = np.zeros(n, dtype=bool)
         peds = np.asarray(peds, dtype=float).reshape(-1, 2)
-        if not self.settings.enabled or n == 0 or len(peds) == 0 or len(self.regions) == 0:
-            return out
-        K = self.horizon(claims.index)
         r_max = float(self.reach(K.max()))
         # pedestrian-region distances; only pedestrians that can reach some region matter
         P, G = len(peds), len(self.regions)
@@ -201,7 +258,6 @@ class PedestrianRule:
             return out
         peds, d_pg = peds[near], d_pg[near]
         # broad phase: claims whose bounding box meets a region's box and some pedestrian's reach
-        lo, hi = claims.aabb()
         meets_g = np.all((lo[:, None] <= self.hi[None] + GEOMETRY_TOL) & (hi[:, None] >= self.lo[None] - GEOMETRY_TOL),
                          axis=2)                                                     # (n, G)
         gap = np.maximum(np.maximum(lo[:, None] - peds[None], peds[None] - hi[:, None]), 0.0)
@@ -212,8 +268,8 @@ class PedestrianRule:
             if not len(cand):
                 break
             reach = float(self.reach(k))
-            S = claims.polygons_at(k, cand)                                          # (c, m, 2)
-            ci, gj = np.nonzero(meets_g[cand])
+            S, nonempty = polygons_at(k, cand)                                       # (c, m, 2)
+            ci, gj = np.nonzero(meets_g[cand] & nonempty[:, None])
             hit = intersect_sat(S[ci], self.regions[gj], GEOMETRY_TOL)               # S_k meets G
             ci, gj = ci[hit], gj[hit]
             if not len(ci):
@@ -227,6 +283,18 @@ class PedestrianRule:
             close = point_polygon_distance(S[a], peds[b]) <= reach                   # S_k within reach of p
             out[cand[np.unique(a[close])]] = True
         return out
+
+
+def _reach_boxes(claims: ReachClaims, k: int, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """World corners (c, 4, 2, CCW) of boxes ``S_k`` of claims ``idx``, and which are nonempty
+    (an empty box's corners are the centre: never used)."""
+    lo, hi = claims.lo[idx, k - 1], claims.hi[idx, k - 1]
+    ok = np.all(lo <= hi, axis=1)
+    lo, hi = np.where(ok[:, None], lo, 0.0), np.where(ok[:, None], hi, 0.0)
+    C = np.stack([lo, np.column_stack([hi[:, 0], lo[:, 1]]), hi, np.column_stack([lo[:, 0], hi[:, 1]])], axis=1)
+    c, s = np.cos(claims.heading[idx])[:, None], np.sin(claims.heading[idx])[:, None]
+    W = np.stack([c * C[..., 0] - s * C[..., 1], s * C[..., 0] + c * C[..., 1]], axis=-1)
+    return W + claims.centre[idx][:, None, :], ok
 
 
 def footprint_contacts(ids, centre, heading, length, width, ped_ids, peds, radius: float) -> set:

@@ -36,29 +36,34 @@ class StandingPedestrian(FreePlaneWorld):
         return [], np.zeros((0, 2))
 
 
-def _run(enabled: bool, leave_s: float):
+def _run(enabled: bool, leave_s: float, controller: str = "paper"):
     vc = CLASSES["car"]
     spec = VehicleSpec(id="car", vclass="car", waypoints=subsample(np.array([[0.0, 0.0], [60.0, 0.0]]),
                                                                   vc.model.delta))
-    s = CosimSettings(disturbance="none")
+    s = CosimSettings(disturbance="none", controller=controller)
     rule = PedestrianRule(PedestrianSettings(enabled=enabled), [CROSSING], s.Ts)
     sim = Cosim(CLASSES, [spec], s, world=StandingPedestrian(leave_s), pedestrians=rule)
     sim.run(600)
     return sim
 
 
-def test_counter_fires_when_the_rule_is_off():
-    sim = _run(enabled=False, leave_s=1e9)
+@pytest.mark.parametrize("controller", ["paper", "authority"])
+def test_counter_fires_when_the_rule_is_off(controller):
+    sim = _run(enabled=False, leave_s=1e9, controller=controller)
     assert sim.pedestrian_conflicts == {("car", "p")}
     assert sim.pedestrian_withheld == 0
 
 
-def test_rule_on_the_car_waits_for_the_pedestrian_and_then_goes():
-    sim = _run(enabled=True, leave_s=20.0)
+@pytest.mark.parametrize("controller", ["paper", "authority"])
+def test_rule_on_the_car_waits_for_the_pedestrian_and_then_goes(controller):
+    sim = _run(enabled=True, leave_s=20.0, controller=controller)
     assert sim.pedestrian_conflicts == set()
     assert sim.pedestrian_withheld > 0
     rec = sim.records["car"]
     assert rec.arrived_s is not None and rec.arrived_s > 20.0   # after the pedestrian left
+    # it stopped short of the crossing (x in [28, 32]): its footprint never reached it while p stood there
+    if controller == "authority":
+        assert rec.arrived_s < 20.0 + 15.0                          # and then went (60 m route)
 
 
 # ------------------------------------------------------------------ real SUMO
@@ -233,11 +238,164 @@ def test_a_faster_pedestrian_vtype_raises_the_speed_bound(ped_cfg, tmp_path):
     assert s["pedestrian_speed_bound_mps"] == pytest.approx(5.0 * STRIPING_SPEED_FACTOR, rel=1e-3)
 
 
-def test_authority_mode_with_pedestrian_regions_is_refused_by_name(ped_cfg, tmp_path):
-    """--controller authority has no pedestrian guard yet: a net with crossings is refused with a
-    message naming the file and the two ways out, not driven unguarded."""
-    import bridge.sumo_world as sw
+class ReachGrantWatch(GrantWatch):
+    """GrantWatch for authority mode: at each decision, every granted reach claim's boxes S_k
+    (k = 1 .. max(l, 1): the steps the rule checks) against persons on crossings (positions the
+    rule saw); box corners built here, distances by tm.pedestrians.point_polygon_distance."""
 
-    s = sw.run_sumo(str(ped_cfg), tmp_path, _opts(controller="authority", duration=5.0))
-    assert s["complete"] is False
-    assert str(ped_cfg) in s["error"] and "--controller paper" in s["error"] and "--pedestrians ignore" in s["error"]
+    def on_step(self, sim, state, decision, row):
+        from tm.pedestrians import point_polygon_distance
+        if decision is not None and decision.go.any() and len(self.peds):
+            on = np.array([point_polygon_distance(self.crossings, np.repeat(p[None], len(self.crossings), 0)).min()
+                           <= 1e-9 for p in self.peds], dtype=bool)
+            P = self.peds[on]
+            c = decision.claims                           # in force after the decision: granted rows are new
+            for i in np.flatnonzero(decision.go):
+                for k in range(1, min(max(int(state.req_index[i]), 1), c.lo.shape[1]) + 1):
+                    lo, hi = c.lo[i, k - 1], c.hi[i, k - 1]
+                    if np.any(lo > hi):
+                        continue
+                    self.checked += 1
+                    C = np.array([[lo[0], lo[1]], [hi[0], lo[1]], [hi[0], hi[1]], [lo[0], hi[1]]])
+                    th = c.heading[i]
+                    box = C @ np.array([[np.cos(th), np.sin(th)], [-np.sin(th), np.cos(th)]]) + c.centre[i]
+                    if len(P):
+                        d = point_polygon_distance(np.repeat(box[None], len(P), 0), P)
+                        self.inside += int((d <= 0.3).sum())     # within a body radius
+        self.peds = sim._peds()[1].copy()
+
+
+@pytest.mark.parametrize("mode", ["guard", "ignore"])
+def test_authority_mode_no_granted_reach_claim_contains_a_pedestrian_on_a_crossing(ped_cfg, tmp_path,
+                                                                                    monkeypatch, mode):
+    """--controller authority on the 4-arm junction with personFlows (real SUMO): with the rule no
+    granted S_k (k <= max(l, 1)) comes within a body radius of a person on a crossing, 0 SUMO
+    collisions, 0 pedestrian_conflicts, requests withheld for pedestrians and still cars and persons
+    arrive; without it grants do cover persons (the check is not vacuous)."""
+    import bridge.sumo_world as sw
+    from bridge.sumo_inputs import parse_xml
+    from bridge.sumo_pedestrians import _segment_boxes, _shape
+
+    crossings = [b for e in parse_xml(ped_cfg.parent / "n.net.xml").getroot().iter("edge")
+                 if e.get("function") == "crossing" for ln in e.iter("lane")
+                 for b in _segment_boxes(_shape(ln.get("shape")), float(ln.get("width")))]
+    watch = ReachGrantWatch(np.stack(crossings))
+    real = sw.observers_for
+    monkeypatch.setattr(sw, "observers_for", lambda *a, **k: real(*a, **k) + [watch])
+    s = sw.run_sumo(str(ped_cfg), tmp_path, _opts(controller="authority", pedestrians=mode))
+    assert s["complete"], s.get("error")
+    assert s["collisions_sumo"] == 0
+    assert s["vehicles_arrived"] > 0 and s["persons_arrived"] > 0
+    assert watch.checked > 100
+    if mode == "guard":
+        assert watch.inside == 0 and s["pedestrian_conflicts"] == 0 and s["pedestrian_withheld"] > 0
+        assert s["safe"]
+    else:
+        assert watch.inside > 0 and s["pedestrian_withheld"] == 0
+
+
+# ------------------------------------------------------------------ one claim computation per step
+def _counting(obj, name, calls):
+    real = getattr(obj, name)
+
+    def wrapped(*a, **k):
+        calls.append(a)
+        return real(*a, **k)
+    setattr(obj, name, wrapped)
+
+
+def test_paper_mode_the_junction_gate_and_the_pedestrian_rule_share_the_steps_claims():
+    """Requests' claims are built once per step: the zone gate and the pedestrian rule both read them
+    (each built its own before), and the rule still withholds."""
+    from tm.junctions import Zone
+
+    vc = CLASSES["car"]
+    spec = VehicleSpec(id="car", vclass="car", waypoints=subsample(np.array([[0.0, 0.0], [60.0, 0.0]]),
+                                                                  vc.model.delta))
+    s = CosimSettings(disturbance="none")
+    rule = PedestrianRule(PedestrianSettings(), [CROSSING], s.Ts)
+    sim = Cosim(CLASSES, [spec], s, world=StandingPedestrian(1e9), pedestrians=rule,
+                zones=[Zone("z", (26.0, -6.0), (34.0, 6.0))])
+    calls, inside = [], []
+    _counting(sim.tm, "claims", calls)
+    real = sim._requests
+
+    def requests():                                   # tm.claims calls made while the requests are filtered
+        n0, w0 = len(calls), sim.pedestrian_withheld
+        state = real()
+        inside.append((len(calls) - n0, sim.pedestrian_withheld - w0))
+        return state
+    sim._requests = requests
+    sim.run(300)
+    assert max(n for n, _ in inside) == 1              # the gate and the rule: one computation
+    assert sum(w for _, w in inside) > 10 and sim.pedestrian_conflicts == set()
+
+
+def test_authority_mode_the_pedestrian_rule_and_the_tm_share_the_requests_reach_claims():
+    vc = CLASSES["car"]
+    spec = VehicleSpec(id="car", vclass="car", waypoints=subsample(np.array([[0.0, 0.0], [60.0, 0.0]]),
+                                                                  vc.model.delta))
+    s = CosimSettings(disturbance="none", controller="authority")
+    rule = PedestrianRule(PedestrianSettings(), [CROSSING], s.Ts)
+    sim = Cosim(CLASSES, [spec], s, world=StandingPedestrian(10.0), pedestrians=rule)
+    calls = []
+    _counting(sim, "_reach_claims", calls)
+    sim.run(1)
+    per_step = []
+    for _ in range(300):
+        calls.clear()
+        sim.step()
+        per_step.append(sum(1 for a in calls if a))      # calls for requests (with a FleetState argument)
+    assert max(per_step) == 1 and sum(per_step) > 50
+    assert sim.pedestrian_withheld > 0 and sim.records["car"].arrived_s is not None
+
+
+def test_a_person_riding_a_vehicle_is_no_pedestrian(ped_cfg, tmp_path):
+    """SUMO gives a rider its vehicle's position: read_persons leaves riders out (they met their own
+    vehicle's footprint: pedestrian_conflicts fired on tools/game/rail), walkers stay in."""
+    import libsumo
+
+    from bridge.sumo_pedestrians import read_persons
+
+    (tmp_path / "r.rou.xml").write_text(
+        '<routes><vType id="car" vClass="passenger" length="5" width="1.8"/>'
+        '<vehicle id="c" type="car" depart="triggered"><route edges="WC CE"/></vehicle>'
+        '<person id="rider" depart="0"><ride from="WC" to="CE" lines="c"/></person>'
+        '<person id="walker" depart="0"><walk from="NC" to="CS"/></person></routes>')
+    libsumo.start(["sumo", "-n", str(ped_cfg.parent / "n.net.xml"), "-r", str(tmp_path / "r.rou.xml"),
+                   "--step-length", "0.1", "--no-step-log", "true", "--no-warnings", "true"])
+    try:
+        riding = 0
+        for _ in range(100):
+            libsumo.simulationStep()
+            ids, xy = read_persons(libsumo)
+            assert "rider" not in ids or not libsumo.person.getVehicle("rider")
+            assert "walker" in ids and xy.shape == (len(ids), 2)
+            if "rider" in libsumo.person.getIDList() and libsumo.person.getVehicle("rider") == "c":
+                riding += 1
+                assert np.allclose(libsumo.person.getPosition("rider"), libsumo.vehicle.getPosition("c"), atol=5.0)
+    finally:
+        libsumo.close()
+    assert riding > 50           # the rider was in the car for most of the window: the filter was needed
+
+
+@pytest.mark.parametrize("controller", ["paper", "authority"])
+@pytest.mark.parametrize("enabled", [True, False])
+def test_admission_waits_while_a_pedestrian_stands_where_the_car_would_appear(controller, enabled):
+    """A car whose first waypoint is 2 m before the crossing (its footprint reaches x = 28.5, the
+    crossing starts at x = 28) is not admitted while the pedestrian stands on it (until 5 s), with
+    either controller; with the rule off it appears at once and meets the pedestrian."""
+    vc = CLASSES["car"]
+    spec = VehicleSpec(id="car", vclass="car", waypoints=subsample(np.array([[26.0, 0.0], [60.0, 0.0]]),
+                                                                  vc.model.delta))
+    s = CosimSettings(disturbance="none", controller=controller)
+    rule = PedestrianRule(PedestrianSettings(enabled=enabled), [CROSSING], s.Ts)
+    sim = Cosim(CLASSES, [spec], s, world=StandingPedestrian(5.0), pedestrians=rule)
+    sim.run(400)
+    rec = sim.records["car"]
+    if enabled:
+        assert rec.admitted_s is not None and rec.admitted_s >= 5.0
+        assert sim.pedestrian_withheld > 0 and sim.pedestrian_conflicts == set()
+        assert rec.arrived_s is not None
+    else:
+        assert rec.admitted_s == 0.0 and sim.pedestrian_conflicts == {("car", "p")}
