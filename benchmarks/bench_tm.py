@@ -250,8 +250,8 @@ class LaneGrid:
             lane, k = g["lane"], g["k"]
             hd = self.lane_h[lane]
             if state is None:
-                part = (c, g["X"], self.wp(lane, k), hd, g["l"])
-                out.append(((g["ids"],) + part) if with_ids else part)
+                part = (g["X"], self.wp(lane, k), hd, g["l"])
+                out.append((c, g["ids"]) + part if with_ids else (c,) + part)
             else:
                 r = state.requesting[o:o + n]
                 out.append((c, g["X"][r], self.wp(lane, k + 1)[r], hd[r], np.minimum(g["lq"][r], self.ctl[c].N)))
@@ -318,37 +318,50 @@ class LaneGrid:
 def reach_case(V: int, warmup: int, steps: int, repeats: int, seed: int = 0) -> list[dict]:
     """Median decision time of ``decide_reach`` on a :class:`LaneGrid` of ``V`` vehicles, timed check.
 
-    The fleet is driven by the ``optimal`` decisions on fresh claims; at each of ``steps`` steps (after
-    ``warmup``) every variant decides on the same state (``repeats`` times, median): its wall time
-    includes the claims (every vehicle's current ones, the requesters' requested ones)."""
+    Variants ``(policy, claims)``: ``optimal`` / ``greedy``, and ``fresh`` (every vehicle's current
+    claims computed anew, as before claim reuse) / ``reuse`` (current claims from a
+    :class:`tm.reach_cache.ClaimCache`, fresh only where reuse is not sound).  The fleet is driven by
+    ``(optimal, fresh)``; at each of ``steps`` steps (after ``warmup``) every variant decides on the
+    same state (``repeats`` times, median).  A decision's wall time includes its claims (current ones
+    and the requesters' requested ones).  ``grants_lost``: requests the variant denies that the
+    driver granted (the price of the shifted claims' outer bound)."""
+    from tm.reach_cache import ClaimCache
     from tm.settings import TMSettings
 
     grid = LaneGrid(V, np.random.default_rng(seed))
     grid.target = grid.size
     fams = {c: f.position_sets for c, f in grid.fam.items()}
-    variants = {p: TrafficManager(TMSettings(policy=p, check="timed"), fams, rotating=set(fams))
-                for p in ("optimal", "greedy")}
+    variants = {(p, c): TrafficManager(TMSettings(policy=p, check="timed"), fams, rotating=set(fams))
+                for c in ("fresh", "reuse") for p in ("optimal", "greedy")}
+    caches = {key: ClaimCache(grid.book) for key in variants if key[1] == "reuse"}
     rows = []
     for t in range(warmup + steps):
         state = grid.state()
-        drive = None
-        for policy, tm in variants.items():
+        decisions = {}
+        for key, tm in variants.items():
+            if t < warmup and key != ("optimal", "fresh") and key[1] != "reuse":
+                continue
             walls = []
+            cache = caches.get(key)
             for _ in range(repeats if t >= warmup else 1):
                 t0 = time.perf_counter()
-                cur = grid.book.claims(grid.parts())
+                cur = cache.current(t, grid.parts(with_ids=True)) if cache else grid.book.claims(grid.parts())
                 new = grid.book.claims(grid.parts(state))
                 d = tm.decide_reach(state, cur, new)
                 walls.append(time.perf_counter() - t0)
-            if policy == "optimal":
-                drive = d
+            if cache:
+                cache.commit(d.go)
+            decisions[key] = d
             if t >= warmup:
                 ti = d.timings
-                rows.append(dict(vehicles=len(state), requesting=int(state.requesting.sum()), policy=policy,
-                                 claims="fresh", step=t, decide_ms=np.median(walls) * 1e3,
+                rows.append(dict(vehicles=len(state), requesting=int(state.requesting.sum()), policy=key[0],
+                                 claims=key[1], step=t, decide_ms=np.median(walls) * 1e3,
                                  claims_ms=(np.median(walls) - ti.broad - ti.narrow - ti.select) * 1e3,
                                  broad_ms=ti.broad * 1e3, narrow_ms=ti.narrow * 1e3, select_ms=ti.select * 1e3,
-                                 grants=int(d.go.sum())))
+                                 grants=int(d.go.sum()), reused=int(cache.last_reused.sum()) if cache else 0))
+        drive = decisions[("optimal", "fresh")]
+        for r in rows[len(rows) - (len(decisions) if t >= warmup else 0):]:
+            r["grants_lost"] = int((drive.go & ~decisions[(r["policy"], r["claims"])].go).sum())
         grid.apply(drive.go)
     return rows
 
@@ -359,7 +372,8 @@ def reach_main(quick: bool, out: Path) -> pd.DataFrame:
     warm, steps = (REACH_WARMUP_QUICK, REACH_STEPS_QUICK) if quick else (REACH_WARMUP, REACH_STEPS)
     per_step = pd.DataFrame([dict(r, fleet=V) for V in sizes
                              for r in reach_case(V, warm, steps, 3 if quick else 5)])
-    cols = ["vehicles", "requesting", "grants", "decide_ms", "claims_ms", "broad_ms", "narrow_ms", "select_ms"]
+    cols = ["vehicles", "requesting", "grants", "reused", "grants_lost", "decide_ms", "claims_ms", "broad_ms",
+            "narrow_ms", "select_ms"]
     df = per_step.groupby(["fleet", "policy", "claims"], sort=False)[cols].median().reset_index()
     df["p90_decide_ms"] = per_step.groupby(["fleet", "policy", "claims"], sort=False)["decide_ms"].quantile(
         0.9).to_numpy()

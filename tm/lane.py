@@ -335,7 +335,7 @@ class Lane:
             cur = self._cached_claims()
         dec = self._tm_for().decide_reach(state, cur, new)
         if self.settings.reuse:
-            self._cache.commit(dec.claims, dec.go)
+            self._cache.commit(dec.go)
         for r, i in enumerate(req):
             if dec.go[i]:
                 v = self.vehicles[i]

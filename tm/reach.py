@@ -40,7 +40,7 @@ from controllers.synthesis import SetFamily, along_factor, rotate_pairs
 from controllers.tolerances import GEOMETRY_TOL, REACH_LOOKUP_MARGIN
 
 __all__ = ["ReachModel", "ReachClaims", "reach_claims", "claims_conflict", "pairwise_conflicts", "world_aabb",
-           "candidate_pairs", "pad_slots", "slot_aabb", "PREFILTER_TOL_FACTOR"]
+           "candidate_pairs", "pad_slots", "slot_aabb", "union_aabb", "PREFILTER_TOL_FACTOR"]
 
 #: The per-slot world bounding boxes that pre-filter the ``timed`` check are compared with
 #: ``PREFILTER_TOL_FACTOR * tol``: two oriented boxes that the separating-axis test with ``tol``
@@ -357,21 +357,46 @@ def _hull(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def slot_aabb(centre, heading, lo, hi) -> np.ndarray:
     """World bounding boxes ``(4, n, K)`` (``x_lo, x_hi, y_lo, y_hi``) of boxes ``centre + R(heading)
     [lo, hi]`` (lo, hi (n, K, 2)); empty boxes inverted (``+inf, -inf``)."""
+    n, K = lo.shape[:2]
     c, s = np.cos(heading)[:, None], np.sin(heading)[:, None]
     ac, as_ = np.abs(c), np.abs(s)
     l0, l1, h0, h1 = lo[..., 0], lo[..., 1], hi[..., 0], hi[..., 1]
-    mx, my = 0.5 * (l0 + h0), 0.5 * (l1 + h1)
-    hx, hy = 0.5 * (h0 - l0), 0.5 * (h1 - l1)
-    wx = centre[:, :1] + c * mx - s * my
-    wy = centre[:, 1:] + s * mx + c * my
-    ex = ac * hx + as_ * hy
-    ey = as_ * hx + ac * hy
-    out = np.stack([wx - ex, wx + ex, wy - ey, wy + ey])
-    empty = ~((l0 <= h0) & (l1 <= h1))
+    out = np.empty((4, n, K))
+    with np.errstate(invalid="ignore"):  # empty boxes (inf, -inf): fixed below
+        mx = l0 + h0
+        mx *= 0.5
+        my = l1 + h1
+        my *= 0.5
+        hx = h0 - l0
+        hx *= 0.5
+        hy = h1 - l1
+        hy *= 0.5
+        wx = c * mx
+        wx -= s * my
+        wx += centre[:, :1]
+        wy = s * mx
+        wy += c * my
+        wy += centre[:, 1:]
+        ex = ac * hx
+        ex += as_ * hy
+        ey = as_ * hx
+        ey += ac * hy
+        np.subtract(wx, ex, out=out[0])
+        np.add(wx, ex, out=out[1])
+        np.subtract(wy, ey, out=out[2])
+        np.add(wy, ey, out=out[3])
+        empty = ~((hx >= 0) & (hy >= 0))
     if empty.any():
         out[0][empty] = out[2][empty] = np.inf
         out[1][empty] = out[3][empty] = -np.inf
     return out
+
+
+def union_aabb(claims: ReachClaims) -> tuple[np.ndarray, np.ndarray]:
+    """World bounding boxes (n, 2) of the union of every vehicle's slot boxes (inverted when all are
+    empty): inside :func:`world_aabb`, enough for the ``timed`` check (a conflict is a slot overlap)."""
+    b = claims.slot_boxes
+    return np.stack([b[0].min(axis=1), b[2].min(axis=1)], axis=1), np.stack([b[1].max(axis=1), b[3].max(axis=1)], axis=1)
 
 
 def world_aabb(claims: ReachClaims) -> tuple[np.ndarray, np.ndarray]:

@@ -61,7 +61,7 @@ class _Entry:
     centre: np.ndarray   # (n, 2)
     heading: np.ndarray  # (n,)
     index: np.ndarray    # (n,) capped at the class's N
-    claims: ReachClaims | None = None
+    claims: ReachClaims | None = None   # the claims handed out (in force for those not granted)
     granted: np.ndarray | None = None
 
 
@@ -133,17 +133,15 @@ class ClaimCache:
                                 for p in parts])
         n = len(ids)
         reuse, j = self._reusable(t, ids, cls, X, centre, heading, index)
-        lo = np.empty((n, self.K, 2))
-        hi = np.empty((n, self.K, 2))
-        boxes = np.empty((4, n, self.K))
         r = np.flatnonzero(reuse)
-        if len(r):
+        lo, hi, boxes = np.empty((n, self.K, 2)), np.empty((n, self.K, 2)), np.empty((4, n, self.K))
+        if len(r):  # slot k <- slot k + 1 of the stored claims, the last one kept (ReachClaims.shift)
             old = self._last.claims
-            src = j[r]
-            lo[r, :-1], lo[r, -1] = old.lo[src, 1:], old.lo[src, -1]
-            hi[r, :-1], hi[r, -1] = old.hi[src, 1:], old.hi[src, -1]
+            src = slice(None) if ids == self._last.ids else np.where(reuse, j, 0)
             ob = old.slot_boxes
-            boxes[:, r, :-1], boxes[:, r, -1] = ob[:, src, 1:], ob[:, src, -1]
+            lo[:, :-1], lo[:, -1] = old.lo[src, 1:], old.lo[src, -1]
+            hi[:, :-1], hi[:, -1] = old.hi[src, 1:], old.hi[src, -1]
+            boxes[:, :, :-1], boxes[:, :, -1] = ob[:, src, 1:], ob[:, src, -1]
         f = np.flatnonzero(~reuse)
         for c in dict.fromkeys(cls[f].tolist()):
             g = f[cls[f] == c]
@@ -152,12 +150,14 @@ class ClaimCache:
         self.last_reused = reuse
         self.stats.reused += len(r)
         self.stats.fresh += len(f)
-        self._pending = _Entry(t, ids, dict(zip(ids, range(n))), cls, X, centre, heading, index)
-        return ReachClaims(centre, heading, lo, hi)._with_boxes(boxes)
+        out = ReachClaims(centre, heading, lo, hi)._with_boxes(boxes)
+        self._pending = _Entry(t, ids, dict(zip(ids, range(n))), cls, X, centre, heading, index, out)
+        return out
 
-    def commit(self, claims: ReachClaims, granted: np.ndarray) -> None:
-        """Store the claims in force after the decision of the step of the last :meth:`current`
-        (``decision.claims``, rows as there) and who was granted (``decision.go``: not reused)."""
+    def commit(self, granted: np.ndarray) -> None:
+        """Record the decision of the step of the last :meth:`current`: ``granted`` (n,) (e.g.
+        ``decision.go``).  The claims in force of the vehicles not granted are the ones
+        :meth:`current` handed out (a decision keeps them); the granted ones are not reused."""
         e = self._pending
         if e is None:
             self._last = None
@@ -165,10 +165,7 @@ class ClaimCache:
         granted = np.asarray(granted, dtype=bool)
         if granted.shape != (len(e.ids),):
             raise ValueError(f"ClaimCache.commit: granted must have shape ({len(e.ids)},), got {granted.shape}")
-        if len(claims) != len(e.ids):
-            raise ValueError(f"ClaimCache.commit: {len(claims)} claims for {len(e.ids)} vehicles")
-        claims = pad_slots(claims, self.K)
-        self._last = _Entry(e.t, e.ids, e.row, e.cls, e.X, e.centre, e.heading, e.index, claims, granted)
+        self._last = _Entry(e.t, e.ids, e.row, e.cls, e.X, e.centre, e.heading, e.index, e.claims, granted)
         self._pending = None
 
     # ------------------------------------------------------------------ the premises

@@ -108,7 +108,7 @@ def test_shifted_claims_contain_fresh_ones(lcs, classes, seed, policy, sign, p_s
         inforce = got if not granted.any() else ReachClaims.concat(*[
             book.fresh([parts[v][:3] + (C[[v]], H[[v]], L[[v]])]) if granted[v] else got.take([v])
             for v in range(n)])
-        cache.commit(inforce, granted)
+        cache.commit(granted)
         for v, c in enumerate(classes):
             lc = lcs[c]
             m = lc.vclass.model
@@ -165,7 +165,7 @@ def test_each_reason_for_fresh_claims_fires(lcs):
         else:
             assert not cache.last_reused[0] and reasons[want] == before[want] + 1, (t, want)
         if commit is not None:
-            cache.commit(c, commit)
+            cache.commit(commit)
         X, L = step(X, C, L)
     assert cache.stats.reused == 2 and cache.stats.fresh == 8 == sum(reasons.values())
 
@@ -216,7 +216,7 @@ def test_fresh_check_of_a_reused_decision_fires(lcs):
     lane._cache = ClaimCache(_Book({"car": lcs["car"]}))
     lane._cache_models = {id(lcs["car"].reach)}
     lane._cache.current = lambda t, parts: empty()
-    lane._cache.commit = lambda claims, granted: None
+    lane._cache.commit = lambda granted: None
     for _ in range(3):
         lane.step()
     assert lane.claim_overlaps > 0
