@@ -39,6 +39,7 @@ from controllers.synthesis import synthesize
 from tm.claims import Claims
 from tm.reach import ReachClaims
 from tm.reach_book import ReachBook, admit_reach, footprint_claims
+from tm.reach_cache import ClaimCache
 from tm.junctions import ClassReach, JunctionFleet, JunctionGate, Zone
 from tm.manager import FleetState, TrafficManager
 from tm.pedestrians import STRIPING_SPEED_FACTOR, PedestrianRule, footprint_contacts
@@ -211,6 +212,8 @@ class Cosim:
         #: claim models (authority mode): reach-tightened, time-indexed claims (tm.reach_book)
         self.reach = ReachBook(self.families, {c: (vc.length, vc.width) for c, vc in self.classes.items()}) \
             if self.authority else None
+        #: current claims reused between steps where sound (tm.reach_cache; authority mode)
+        self.claim_cache = ClaimCache(self.reach) if self.authority else None
         self.groups = {c: _Group(vc, STMPC(self.families[c], cs)) for c, vc in self.classes.items()}
         self.tm = TrafficManager(settings.tm, {c: f.position_sets for c, f in self.families.items()},
                                  rotating=[c for c, vc in self.classes.items() if vc.model.frame == "road"])
@@ -409,6 +412,15 @@ class Cosim:
             o += len(g.ids)
         return self.reach.claims(parts)
 
+    def _claim_parts(self) -> list:
+        """Every vehicle's current claim inputs with ids, in fleet order (for :class:`ClaimCache`)."""
+        parts = []
+        for c, g in self.groups.items():
+            if g.ids:
+                cen, hd, _ = g.centres()
+                parts.append((c, g.ids, g.X, cen, hd, g.l))
+        return parts
+
     def _entry_claims(self, ready: list[VehicleSpec], cand: FleetState) -> ReachClaims:
         """Reach claims of the ready vehicles at rest on their first waypoints (in ``ready``'s order)."""
         parts, rows = [], []
@@ -438,8 +450,12 @@ class Cosim:
         if state is not None:
             # 2. TM: Go/Stop for every request
             td = time.perf_counter()
-            dec = self.tm.decide_reach(state, self._reach_claims(), self._reach_claims(state)) \
-                if self.authority else self.tm.decide(state)
+            if self.authority:  # current claims from the cache (shifted where sound), requested ones fresh
+                dec = self.tm.decide_reach(state, self.claim_cache.current(self.t, self._claim_parts()),
+                                           self._reach_claims(state))
+                self.claim_cache.commit(dec.go)
+            else:
+                dec = self.tm.decide(state)
             ms_decide = (time.perf_counter() - td) * 1e3
             self.last_decision = dec
             ms_tm = (time.perf_counter() - tt) * 1e3
