@@ -213,36 +213,39 @@ def reach_claims(rm: ReachModel, X: np.ndarray, centre: np.ndarray, heading: np.
     E = rotate_pairs(X - np.hstack([centre, np.zeros((n, 2))]), -heading)  # segment frame, error
     k = np.arange(1, K + 1)
     m = np.maximum(index[:, None] - k[None, :], 0)                      # (n, K)
-    # reach intervals per factor: centre A^k e, radius r_k
-    ca = np.einsum("kij,nj->nki", rm.Ak_al[1:], E[:, [0, 2]])
-    cy = np.einsum("kij,nj->nki", rm.Ak_ac[1:], E[:, [1, 3]])
-    ra, ry = rm.r_al[1:], rm.r_ac[1:]
-    Kr = ca.shape[1]  # K - 1 reach slots; the last slot is T^0 whole
-    p_lo, p_hi = ca[..., 0] - ra[None, :, 0], ca[..., 0] + ra[None, :, 0]
-    v_lo = np.maximum(ca[..., 1] - ra[None, :, 1], T.v_lo[m[:, :Kr]])
-    v_hi = np.minimum(ca[..., 1] + ra[None, :, 1], T.v_hi[m[:, :Kr]])
+    Kr = K - 1  # reach slots; the last slot is T^0 whole
     mm = m[:, :Kr]
-    # tables read just outside the velocity bounds (REACH_LOOKUP_MARGIN: ties at grid points)
-    a_lo = np.maximum(np.maximum(p_lo, T.h(mm, v_hi + REACH_LOOKUP_MARGIN)), T.p_lo[mm])
-    a_hi = np.minimum(np.minimum(p_hi, T.g(mm, v_lo - REACH_LOOKUP_MARGIN)), T.p_hi[mm])
-    y_lo = np.maximum(cy[..., 0] - ry[None, :, 0], T.y_lo[mm])
-    y_hi = np.minimum(cy[..., 0] + ry[None, :, 0], T.y_hi[mm])
-    lo = np.empty((n, K, 2))
-    hi = np.empty((n, K, 2))
-    lo[:, :Kr, 0], hi[:, :Kr, 0], lo[:, :Kr, 1], hi[:, :Kr, 1] = a_lo, a_hi, y_lo, y_hi
-    lo[:, Kr:, 0], hi[:, Kr:, 0] = T.p_lo[0], T.p_hi[0]
-    lo[:, Kr:, 1], hi[:, Kr:, 1] = T.y_lo[0], T.y_hi[0]
+    # reach intervals per factor: centre A^k e, radius r_k (planar (n, Kr) arrays: contiguous)
+    Aa, Ac = rm.Ak_al[1:], rm.Ak_ac[1:]
+    ra, ry = rm.r_al[1:], rm.r_ac[1:]
+    cp = np.outer(E[:, 0], Aa[:, 0, 0]) + np.outer(E[:, 2], Aa[:, 0, 1])
+    cv = np.outer(E[:, 0], Aa[:, 1, 0]) + np.outer(E[:, 2], Aa[:, 1, 1])
+    cy = np.outer(E[:, 1], Ac[:, 0, 0]) + np.outer(E[:, 3], Ac[:, 0, 1])
+    v_lo = np.maximum(cv - ra[:, 1], T.v_lo[mm])
+    v_hi = np.minimum(cv + ra[:, 1], T.v_hi[mm])
     off = np.broadcast_to(np.asarray(body_offset, dtype=float), (n,))
     c, s = np.abs(np.cos(off)), np.abs(np.sin(off))
-    fx = 0.5 * (rm.length * c + rm.width * s)
-    fy = 0.5 * (rm.length * s + rm.width * c)
-    empty = (lo[..., 0] > hi[..., 0]) | (lo[..., 1] > hi[..., 1])
-    lo[..., 0] -= fx[:, None]
-    hi[..., 0] += fx[:, None]
-    lo[..., 1] -= fy[:, None]
-    hi[..., 1] += fy[:, None]
-    lo[empty], hi[empty] = np.inf, -np.inf  # keep empty boxes empty after the footprint
-    return ReachClaims(centre, heading, lo, hi)
+    fx = (0.5 * (rm.length * c + rm.width * s))[:, None]
+    fy = (0.5 * (rm.length * s + rm.width * c))[:, None]
+    P = np.empty((4, n, K))  # along lo, hi, across lo, hi (segment frame, footprint added below)
+    # tables read just outside the velocity bounds (REACH_LOOKUP_MARGIN: ties at grid points)
+    np.maximum(np.maximum(cp - ra[:, 0], T.h(mm, v_hi + REACH_LOOKUP_MARGIN)), T.p_lo[mm], out=P[0, :, :Kr])
+    np.minimum(np.minimum(cp + ra[:, 0], T.g(mm, v_lo - REACH_LOOKUP_MARGIN)), T.p_hi[mm], out=P[1, :, :Kr])
+    np.maximum(cy - ry[:, 0], T.y_lo[mm], out=P[2, :, :Kr])
+    np.minimum(cy + ry[:, 0], T.y_hi[mm], out=P[3, :, :Kr])
+    P[0, :, Kr:], P[1, :, Kr:] = T.p_lo[0], T.p_hi[0]
+    P[2, :, Kr:], P[3, :, Kr:] = T.y_lo[0], T.y_hi[0]
+    empty = (P[0] > P[1]) | (P[2] > P[3])
+    P[0] -= fx
+    P[1] += fx
+    P[2] -= fy
+    P[3] += fy
+    if empty.any():  # keep empty boxes empty after the footprint
+        P[0][empty] = P[2][empty] = np.inf
+        P[1][empty] = P[3][empty] = -np.inf
+    lo = np.stack([P[0], P[2]], axis=-1)
+    hi = np.stack([P[1], P[3]], axis=-1)
+    return ReachClaims(centre, heading, lo, hi)._with_boxes(_slot_aabb_planar(centre, heading, *P))
 
 
 def pad_slots(c: ReachClaims, K: int) -> ReachClaims:
@@ -357,10 +360,14 @@ def _hull(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def slot_aabb(centre, heading, lo, hi) -> np.ndarray:
     """World bounding boxes ``(4, n, K)`` (``x_lo, x_hi, y_lo, y_hi``) of boxes ``centre + R(heading)
     [lo, hi]`` (lo, hi (n, K, 2)); empty boxes inverted (``+inf, -inf``)."""
-    n, K = lo.shape[:2]
+    return _slot_aabb_planar(centre, heading, lo[..., 0], hi[..., 0], lo[..., 1], hi[..., 1])
+
+
+def _slot_aabb_planar(centre, heading, l0, h0, l1, h1) -> np.ndarray:
+    """:func:`slot_aabb` from the corners' coordinates, each (n, K)."""
+    n, K = l0.shape
     c, s = np.cos(heading)[:, None], np.sin(heading)[:, None]
     ac, as_ = np.abs(c), np.abs(s)
-    l0, l1, h0, h1 = lo[..., 0], lo[..., 1], hi[..., 0], hi[..., 1]
     out = np.empty((4, n, K))
     with np.errstate(invalid="ignore"):  # empty boxes (inf, -inf): fixed below
         mx = l0 + h0
