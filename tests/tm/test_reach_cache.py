@@ -274,3 +274,48 @@ def test_vectorised_timed_check_decides_as_the_reference(seed, n, K, right, gap)
     got, want = world_aabb(c), _aabb_reference(c)
     fin = np.isfinite(want[0]).all(axis=1)
     assert np.allclose(got[0][fin], want[0][fin], atol=1e-12) and np.allclose(got[1][fin], want[1][fin], atol=1e-12)
+
+
+@hsettings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2 ** 31), n=st.integers(2, 14), K=st.integers(1, 7), check=st.sampled_from(["timed", "union"]))
+def test_decide_reach_conflicts_are_the_brute_force_ones(seed, n, K, check):
+    """Random claim boxes (random headings, empty slots, some long ones) and random requests: the
+    conflicts decide_reach finds (broad phase on the union of the slot boxes or the hulls, then the
+    narrow phase per kind of pair) are exactly those of every pair tested by the reference."""
+    from tm.manager import FleetState, TrafficManager
+    from tm.settings import TMSettings
+
+    rng = np.random.default_rng(seed)
+
+    def claims(m):
+        lo = rng.uniform(-4, 0, (m, K, 2))
+        hi = lo + rng.uniform(0, 4, (m, K, 2))
+        hi[:, :, 0] += rng.uniform(0, 30, (m, 1)) * (rng.random((m, 1)) < 0.3)
+        empty = rng.random((m, K)) < 0.1
+        lo[empty], hi[empty] = np.inf, -np.inf
+        return ReachClaims(rng.uniform(-15, 15, (m, 2)), rng.uniform(-np.pi, np.pi, m), lo, hi)
+
+    cur = claims(n)
+    req = rng.random(n) < 0.5
+    R = int(req.sum())
+    new = claims(R)
+    state = FleetState(ids=[f"v{i}" for i in range(n)], family=["a"] * n, centre=cur.centre, index=np.zeros(n, int),
+                       heading=cur.heading, length=np.ones(n), width=np.ones(n), requesting=req,
+                       req_centre=cur.centre, req_index=np.zeros(n, int), req_heading=cur.heading)
+    square = [np.array([[-1.0, -1], [1, -1], [1, 1], [-1, 1]])]
+    dec = TrafficManager(TMSettings(check=check), {"a": square}).decide_reach(state, cur, new)
+    got = {(int(u), int(v), k) for (u, v), k in zip(dec.edges.tolist(), dec.edge_kinds.tolist())}
+    got = {(min(u, v), max(u, v), k) if k == "new-new" else (u, v, k) for u, v, k in got}
+    ref = _timed_reference if check == "timed" else (lambda a, i, b, j: claims_conflict(a, i, b, j, "union"))
+    want = set()
+    rq = np.flatnonzero(req)
+    for r, u in enumerate(rq):
+        others = np.array([v for v in range(n) if v != u], dtype=np.intp)
+        if len(others):
+            hit = ref(new, np.full(len(others), r), cur, others)
+            for v in others[hit]:
+                want.add((int(u), int(v), "new-old" if req[v] else "new-fixed"))
+        for r2 in range(r + 1, R):
+            if ref(new, np.array([r]), new, np.array([r2]))[0]:
+                want.add((int(u), int(rq[r2]), "new-new"))
+    assert got == want
