@@ -38,6 +38,7 @@ import numpy as np
 from controllers.authority import AuthorityTables
 from controllers.synthesis import SetFamily, along_factor, rotate_pairs
 from controllers.tolerances import GEOMETRY_TOL, REACH_LOOKUP_MARGIN
+from tm.geometry import broad_phase
 
 __all__ = ["ReachModel", "ReachClaims", "reach_claims", "claims_conflict", "pairwise_conflicts", "world_aabb",
            "candidate_pairs", "pad_slots", "slot_aabb", "union_aabb", "PREFILTER_TOL_FACTOR"]
@@ -424,12 +425,12 @@ def candidate_pairs(lo_a, hi_a, lo_b, hi_b, tol: float = GEOMETRY_TOL) -> tuple[
 
 
 def pairwise_conflicts(claims: ReachClaims, check: str = "timed") -> tuple[np.ndarray, np.ndarray]:
-    """All pairs ``i < j`` of ``claims`` that conflict (dense broad phase on the union boxes, then
-    :func:`claims_conflict`; for lanes and tests)."""
+    """All pairs ``i < j`` of ``claims`` that conflict (grid broad phase on the union boxes, then
+    :func:`claims_conflict`; the monitor, ``verify``, lanes and tests)."""
     lo, hi = world_aabb(claims)
-    i, j = candidate_pairs(lo, hi, lo, hi)
-    keep = i < j
-    i, j = i[keep], j[keep]
+    empty = ~(lo <= hi).all(axis=1)
+    lo, hi = np.where(empty[:, None], 0.0, lo), np.where(empty[:, None], 0.0, hi)  # never hit (narrow phase)
+    i, j = broad_phase(lo, hi, PREFILTER_TOL_FACTOR * GEOMETRY_TOL)
     if not len(i):
         return i, j
     hit = claims_conflict(claims, i, claims, j, check)

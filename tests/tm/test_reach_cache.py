@@ -271,6 +271,9 @@ def test_vectorised_timed_check_decides_as_the_reference(seed, n, K, right, gap)
     short = ReachClaims(centre[:3], heading[:3], lo[:3, :max(K - 2, 1)], hi[:3, :max(K - 2, 1)])
     ii, jj = np.repeat(np.arange(len(short)), n), np.tile(np.arange(n), len(short))
     assert np.array_equal(claims_conflict(short, ii, c2, jj, "timed"), _timed_reference(short, ii, c2, jj))
+    for check, ref in (("timed", _timed_reference), ("union", lambda a, i, b, j: claims_conflict(a, i, b, j, "union"))):
+        pi, pj = pairwise_conflicts(c, check)                    # grid broad phase, then the check
+        assert {*zip(pi.tolist(), pj.tolist())} == {*zip(i[ref(c, i, c, j)].tolist(), j[ref(c, i, c, j)].tolist())}
     got, want = world_aabb(c), _aabb_reference(c)
     fin = np.isfinite(want[0]).all(axis=1)
     assert np.allclose(got[0][fin], want[0][fin], atol=1e-12) and np.allclose(got[1][fin], want[1][fin], atol=1e-12)
