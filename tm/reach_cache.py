@@ -55,7 +55,7 @@ class _Entry:
 
     t: int
     ids: tuple
-    row: dict            # id -> row
+    row: dict | None     # id -> row (built when a later step's ids differ)
     cls: np.ndarray      # (n,) class names
     X: np.ndarray        # (n, 4)
     centre: np.ndarray   # (n, 2)
@@ -119,6 +119,13 @@ class ClaimCache:
             ``K = book.K`` slots, slot boxes (:attr:`~tm.reach.ReachClaims.slot_boxes`) attached.
         """
         parts = [p for p in parts if len(p[1])]
+        for c, pid, *arrays in parts:
+            if c not in self.book.models:
+                raise ValueError(f"ClaimCache.current: class {c!r} has no claim model; known: {sorted(self.book.models)}")
+            lens = [len(a) for a in arrays]
+            if any(k != len(pid) for k in lens):
+                raise ValueError(f"ClaimCache.current: class {c!r}: {len(pid)} ids but X, centre, heading, index "
+                                 f"have {lens} rows")
         ids = tuple(v for p in parts for v in p[1])
         if not parts:
             K = self.K
@@ -151,7 +158,7 @@ class ClaimCache:
         self.stats.reused += len(r)
         self.stats.fresh += len(f)
         out = ReachClaims(centre, heading, lo, hi)._with_boxes(boxes)
-        self._pending = _Entry(t, ids, dict(zip(ids, range(n))), cls, X, centre, heading, index, out)
+        self._pending = _Entry(t, ids, None, cls, X, centre, heading, index, out)
         return out
 
     def commit(self, granted: np.ndarray) -> None:
@@ -182,6 +189,8 @@ class ClaimCache:
         if ids == last.ids:
             j = np.arange(n, dtype=np.intp)
         else:
+            if last.row is None:
+                object.__setattr__(last, "row", dict(zip(last.ids, range(len(last.ids)))))
             get = last.row.get
             j = np.fromiter((get(v, -1) for v in ids), dtype=np.intp, count=n)
         have = j >= 0

@@ -322,3 +322,15 @@ def test_decide_reach_conflicts_are_the_brute_force_ones(seed, n, K, check):
             if ref(new, np.array([r]), new, np.array([r2]))[0]:
                 want.add((int(u), int(rq[r2]), "new-new"))
     assert got == want
+
+
+def test_bad_parts_are_named(lcs):
+    cache = ClaimCache(_Book({"car": lcs["car"]}))
+    X, C = np.zeros((2, 4)), np.zeros((2, 2))
+    with pytest.raises(ValueError, match="class 'tram' has no claim model"):
+        cache.current(0, [("tram", ["a", "b"], X, C, np.zeros(2), np.zeros(2, int))])
+    with pytest.raises(ValueError, match="class 'car': 2 ids but"):
+        cache.current(0, [("car", ["a", "b"], X, C[:1], np.zeros(2), np.zeros(2, int))])
+    cache.current(0, [("car", ["a", "b"], X, C, np.zeros(2), np.zeros(2, int))])
+    with pytest.raises(ValueError, match="granted must have shape"):
+        cache.commit(np.zeros(3, bool))
