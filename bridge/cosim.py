@@ -212,7 +212,8 @@ class Cosim:
         #: claim models (authority mode): reach-tightened, time-indexed claims (tm.reach_book)
         self.reach = ReachBook(self.families, {c: (vc.length, vc.width) for c, vc in self.classes.items()}) \
             if self.authority else None
-        #: current claims reused between steps where sound (tm.reach_cache; authority mode)
+        #: current claims reused between steps where sound (tm.reach_cache; authority mode; set None
+        #: to decide on fresh claims every step)
         self.claim_cache = ClaimCache(self.reach) if self.authority else None
         self.groups = {c: _Group(vc, STMPC(self.families[c], cs)) for c, vc in self.classes.items()}
         self.tm = TrafficManager(settings.tm, {c: f.position_sets for c, f in self.families.items()},
@@ -450,10 +451,12 @@ class Cosim:
         if state is not None:
             # 2. TM: Go/Stop for every request
             td = time.perf_counter()
-            if self.authority:  # current claims from the cache (shifted where sound), requested ones fresh
-                dec = self.tm.decide_reach(state, self.claim_cache.current(self.t, self._claim_parts()),
-                                           self._reach_claims(state))
-                self.claim_cache.commit(dec.go)
+            if self.authority:  # current claims from the cache (shifted where sound; None: fresh), requested fresh
+                cache = self.claim_cache
+                current = cache.current(self.t, self._claim_parts()) if cache is not None else self._reach_claims()
+                dec = self.tm.decide_reach(state, current, self._reach_claims(state))
+                if cache is not None:
+                    cache.commit(dec.go)
             else:
                 dec = self.tm.decide(state)
             ms_decide = (time.perf_counter() - td) * 1e3

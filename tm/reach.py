@@ -161,7 +161,7 @@ class ReachClaims:
     def take(self, idx) -> "ReachClaims":
         b = self._boxes()
         return ReachClaims(self.centre[idx], self.heading[idx], self.lo[idx], self.hi[idx])._with_boxes(
-            None if b is None else b[:, idx])
+            None if b is None else np.take(b, idx, axis=1))
 
     @staticmethod
     def concat(*parts: "ReachClaims") -> "ReachClaims":
@@ -257,7 +257,9 @@ def pad_slots(c: ReachClaims, K: int) -> ReachClaims:
     if k > K:
         raise ValueError(f"pad_slots: claims have {k} slots, more than {K}")
     rep = lambda a: np.concatenate([a, np.repeat(a[:, -1:], K - k, axis=1)], axis=1)  # noqa: E731
-    return ReachClaims(c.centre, c.heading, rep(c.lo), rep(c.hi))
+    b = c._boxes()
+    return ReachClaims(c.centre, c.heading, rep(c.lo), rep(c.hi))._with_boxes(
+        None if b is None else np.concatenate([b, np.repeat(b[:, :, -1:], K - k, axis=2)], axis=2))
 
 
 def _obb(ci, hi_, c, s, lo, hi):
