@@ -341,14 +341,16 @@ def reach_case(V: int, warmup: int, steps: int, repeats: int, seed: int = 0) -> 
         for key, tm in variants.items():
             if t < warmup and key != ("optimal", "fresh") and key[1] != "reuse":
                 continue
-            walls = []
+            walls, cpus = [], []
             cache = caches.get(key)
             for _ in range(repeats if t >= warmup else 1):
+                c0 = time.thread_time()
                 t0 = time.perf_counter()
                 cur = cache.current(t, grid.parts(with_ids=True)) if cache else grid.book.claims(grid.parts())
                 new = grid.book.claims(grid.parts(state))
                 d = tm.decide_reach(state, cur, new)
                 walls.append(time.perf_counter() - t0)
+                cpus.append(time.thread_time() - c0)
             if cache:
                 cache.commit(d.go)
             decisions[key] = d
@@ -356,6 +358,7 @@ def reach_case(V: int, warmup: int, steps: int, repeats: int, seed: int = 0) -> 
                 ti = d.timings
                 rows.append(dict(vehicles=len(state), requesting=int(state.requesting.sum()), policy=key[0],
                                  claims=key[1], step=t, decide_ms=np.median(walls) * 1e3,
+                                 decide_cpu_ms=np.median(cpus) * 1e3,
                                  claims_ms=(np.median(walls) - ti.broad - ti.narrow - ti.select) * 1e3,
                                  broad_ms=ti.broad * 1e3, narrow_ms=ti.narrow * 1e3, select_ms=ti.select * 1e3,
                                  grants=int(d.go.sum()), reused=int(cache.last_reused.sum()) if cache else 0))
@@ -372,7 +375,8 @@ def reach_main(quick: bool, out: Path) -> pd.DataFrame:
     warm, steps = (REACH_WARMUP_QUICK, REACH_STEPS_QUICK) if quick else (REACH_WARMUP, REACH_STEPS)
     per_step = pd.DataFrame([dict(r, fleet=V) for V in sizes
                              for r in reach_case(V, warm, steps, 3 if quick else 5)])
-    cols = ["vehicles", "requesting", "grants", "reused", "grants_lost", "decide_ms", "claims_ms", "broad_ms",
+    cols = ["vehicles", "requesting", "grants", "reused", "grants_lost", "decide_ms", "decide_cpu_ms", "claims_ms",
+            "broad_ms",
             "narrow_ms", "select_ms"]
     df = per_step.groupby(["fleet", "policy", "claims"], sort=False)[cols].median().reset_index()
     df["p90_decide_ms"] = per_step.groupby(["fleet", "policy", "claims"], sort=False)["decide_ms"].quantile(
