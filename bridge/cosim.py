@@ -528,8 +528,10 @@ class Cosim:
         cur = self._fleet(with_requests=False)
         if cur is not None:
             pos = np.vstack([g.X[:, :2] for g in self.groups.values() if g.ids])
-            ms = self.monitor.step(cur.ids, pos, cur.heading, cur.length, cur.width,
-                                   claims=self._reach_claims() if self.authority else self.tm.claims(cur))
+            fresh = self._reach_claims() if self.authority else self.tm.claims(cur)
+            if self.claim_cache is not None:  # the same state decides next step: its claims, as they are
+                self.claim_cache.offer(self.t, self._claim_parts(), fresh)
+            ms = self.monitor.step(cur.ids, pos, cur.heading, cur.length, cur.width, claims=fresh)
             self.world.push(list(cur.ids), pos, cur.heading)
             if np.isfinite(ms.min_separation) and ms.closest_pair:
                 for v in ms.closest_pair:

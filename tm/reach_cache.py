@@ -40,10 +40,12 @@ REASONS = ("new", "stale", "granted", "waypoint", "index", "reach")
 
 @dataclass
 class CacheStats:
-    """Counts over the cache's life: rows reused, rows computed fresh (by first failing reason)."""
+    """Counts over the cache's life: rows reused (shifted), rows taken from claims offered for the same
+    state (:meth:`ClaimCache.offer`), rows computed fresh (by the first failing reason)."""
 
     reused: int = 0
     fresh: int = 0
+    offered: int = 0
 
     def __post_init__(self) -> None:
         self.fresh_by_reason = dict.fromkeys(REASONS, 0)
@@ -89,6 +91,7 @@ class ClaimCache:
         self.last_reused = np.zeros(0, dtype=bool)
         self._last: _Entry | None = None     # committed at its step
         self._pending: _Entry | None = None  # handed out by current(), not yet committed
+        self._offer: _Entry | None = None    # fresh claims of a step's state, offered before current()
         self._reach1 = {c: (m.Ak_al[1], m.r_al[1], m.Ak_ac[1], m.r_ac[1]) for c, m in book.models.items()}
         for c, m in book.models.items():
             for name, Ak, r in (("along", m.Ak_al, m.r_al), ("across", m.Ak_ac, m.r_ac)):
@@ -100,7 +103,35 @@ class ClaimCache:
 
     def reset(self) -> None:
         """Forget every cached claim."""
-        self._last = self._pending = None
+        self._last = self._pending = self._offer = None
+
+    def offer(self, t: int, parts, claims: ReachClaims) -> None:
+        """Fresh claims of the fleet's state at step ``t`` computed elsewhere (e.g. by the monitor at
+        the end of step ``t - 1``), rows as ``parts`` (see :meth:`current`): :meth:`current` at step
+        ``t`` hands them out as they are when its parts are the same (ids, classes, states, waypoints,
+        indices, bit for bit), instead of shifted or recomputed claims."""
+        parts = [p for p in parts if len(p[1])]
+        ids = tuple(v for p in parts for v in p[1])
+        if len(claims) != len(ids):
+            raise ValueError(f"ClaimCache.offer: {len(claims)} claims for {len(ids)} vehicles")
+        self._offer = _Entry(t, ids, None, *self._stack(parts), pad_slots(claims, self.K))
+
+    def _stack(self, parts):
+        cls = np.concatenate([np.full(len(p[1]), p[0], dtype=object) for p in parts])
+        X = np.vstack([np.asarray(p[2], dtype=float) for p in parts])
+        centre = np.vstack([np.asarray(p[3], dtype=float) for p in parts])
+        heading = np.concatenate([np.asarray(p[4], dtype=float) for p in parts])
+        index = np.concatenate([np.minimum(np.asarray(p[5], dtype=np.intp), self.book.models[p[0]].N)
+                                for p in parts])
+        return cls, X, centre, heading, index
+
+    def _offered(self, t, ids, cls, X, centre, heading, index) -> ReachClaims | None:
+        o, self._offer = self._offer, None
+        if o is None or o.t != t or o.ids != ids:
+            return None
+        same = (np.array_equal(o.cls, cls) and np.array_equal(o.X, X) and np.array_equal(o.centre, centre)
+                and np.array_equal(o.heading, heading) and np.array_equal(o.index, index))
+        return o.claims if same else None
 
     def current(self, t: int, parts: Sequence[tuple[str, Sequence[str], np.ndarray, np.ndarray, np.ndarray,
                                                      np.ndarray]]) -> ReachClaims:
@@ -132,13 +163,15 @@ class ClaimCache:
             self._pending = None
             self.last_reused = np.zeros(0, dtype=bool)
             return ReachClaims(np.zeros((0, 2)), np.zeros(0), np.zeros((0, K, 2)), np.zeros((0, K, 2)))
-        cls = np.concatenate([np.full(len(p[1]), p[0], dtype=object) for p in parts])
-        X = np.vstack([np.asarray(p[2], dtype=float) for p in parts])
-        centre = np.vstack([np.asarray(p[3], dtype=float) for p in parts])
-        heading = np.concatenate([np.asarray(p[4], dtype=float) for p in parts])
-        index = np.concatenate([np.minimum(np.asarray(p[5], dtype=np.intp), self.book.models[p[0]].N)
-                                for p in parts])
+        cls, X, centre, heading, index = self._stack(parts)
         n = len(ids)
+        given = self._offered(t, ids, cls, X, centre, heading, index)
+        if given is not None:
+            given.slot_boxes  # noqa: B018  (attached now: the decision and the next shift use them)
+            self.last_reused = np.zeros(n, dtype=bool)
+            self.stats.offered += n
+            self._pending = _Entry(t, ids, None, cls, X, centre, heading, index, given)
+            return given
         reuse, j = self._reusable(t, ids, cls, X, centre, heading, index)
         r = np.flatnonzero(reuse)
         lo, hi, boxes = np.empty((n, self.K, 2)), np.empty((n, self.K, 2)), np.empty((4, n, self.K))

@@ -334,3 +334,29 @@ def test_bad_parts_are_named(lcs):
     cache.current(0, [("car", ["a", "b"], X, C, np.zeros(2), np.zeros(2, int))])
     with pytest.raises(ValueError, match="granted must have shape"):
         cache.commit(np.zeros(3, bool))
+
+
+def test_offered_claims_are_handed_out_only_for_the_same_state(lcs):
+    """Claims offered for step t are handed out by current(t) as they are when ids, states, waypoints
+    and indices match bit for bit; any difference (another state, another step) gets the cache's own."""
+    lc = lcs["car"]
+    book = _Book({"car": lc})
+    cache = ClaimCache(book)
+    X = np.array([[0.0, 0.0, 10.0, 0.0], [40.0, 0.0, 0.0, 0.0]])
+    C = np.array([[lc.ctl.authority.s_ma - 6.0, 0.0], [40.0, 0.0]])
+    H = np.zeros(2)
+    L = np.minimum(lc.ctl.index(X, C, H), lc.ctl.N)
+    parts = [("car", ["a", "b"], X, C, H, L)]
+    fresh = book.fresh(parts)
+    cache.offer(3, parts, fresh)
+    got = cache.current(3, parts)
+    assert got is fresh and cache.stats.offered == 2
+    cache.offer(4, parts, fresh)
+    moved = [("car", ["a", "b"], X + [[1e-6, 0, 0, 0]], C, H, L)]
+    other = cache.current(4, moved)
+    assert other is not fresh and cache.stats.offered == 2
+    assert _contains(other, book.fresh(moved))
+    cache.offer(9, parts, fresh)
+    assert cache.current(5, parts) is not fresh                 # offered for another step
+    with pytest.raises(ValueError, match="1 claims for 2 vehicles"):
+        cache.offer(6, parts, fresh.take([0]))
