@@ -320,7 +320,10 @@ def reach_case(V: int, warmup: int, steps: int, repeats: int, seed: int = 0) -> 
 
     Variants ``(policy, claims)``: ``optimal`` / ``greedy``, and ``fresh`` (every vehicle's current
     claims computed anew, as before claim reuse) / ``reuse`` (current claims from a
-    :class:`tm.reach_cache.ClaimCache`, fresh only where reuse is not sound).  The fleet is driven by
+    :class:`tm.reach_cache.ClaimCache`, shifted, fresh only where reuse is not sound) / ``offered``
+    (current claims computed before the timed region, as the co-simulation's monitor computes them
+    at the end of the step before and offers them, :meth:`tm.reach_cache.ClaimCache.offer`: the
+    decision computes the requesters' claims only).  The fleet is driven by
     ``(optimal, fresh)``; at each of ``steps`` steps (after ``warmup``) every variant decides on the
     same state (``repeats`` times, median).  A decision's wall time includes its claims (current ones
     and the requesters' requested ones).  ``grants_lost``: requests the variant denies that the
@@ -332,7 +335,7 @@ def reach_case(V: int, warmup: int, steps: int, repeats: int, seed: int = 0) -> 
     grid.target = grid.size
     fams = {c: f.position_sets for c, f in grid.fam.items()}
     variants = {(p, c): TrafficManager(TMSettings(policy=p, check="timed"), fams, rotating=set(fams))
-                for c in ("fresh", "reuse") for p in ("optimal", "greedy")}
+                for c in ("fresh", "reuse", "offered") for p in ("optimal", "greedy")}
     caches = {key: ClaimCache(grid.book) for key in variants if key[1] == "reuse"}
     rows = []
     for t in range(warmup + steps):
@@ -343,10 +346,12 @@ def reach_case(V: int, warmup: int, steps: int, repeats: int, seed: int = 0) -> 
                 continue
             walls, cpus = [], []
             cache = caches.get(key)
+            given = grid.book.claims(grid.parts()) if key[1] == "offered" else None  # untimed (the monitor's)
             for _ in range(repeats if t >= warmup else 1):
                 c0 = time.thread_time()
                 t0 = time.perf_counter()
-                cur = cache.current(t, grid.parts(with_ids=True)) if cache else grid.book.claims(grid.parts())
+                cur = (cache.current(t, grid.parts(with_ids=True)) if cache else
+                       given if given is not None else grid.book.claims(grid.parts()))
                 new = grid.book.claims(grid.parts(state))
                 d = tm.decide_reach(state, cur, new)
                 walls.append(time.perf_counter() - t0)
