@@ -13,7 +13,9 @@ the README table).  Tables:
 * ``scale``: ``benchmarks/results/scale.csv`` (``bench_scale.py``), wall seconds per simulated
   second by component;
 * ``scenarios``: ``benchmarks/results/scenarios.csv`` (``bench_scenarios.py``), one row per SUMO demo
-  scenario, muvsim beside SUMO's drivers on the same demand.
+  scenario, muvsim beside SUMO's drivers on the same demand;
+* ``tm_reach``: ``benchmarks/results/tm_reach.csv`` (``bench_tm.py``), the traffic manager on
+  time-indexed reach claims, per fleet size and variant.
 
 Figures are rounded to their meaning (s to 0.1, counts whole, ratios to 0.01 or as measured).
 """
@@ -105,7 +107,23 @@ def scenarios_table(csv: Path = RESULTS / "scenarios.csv") -> str:
     return "\n".join(lines)
 
 
-TABLES = {"traffic": traffic_table, "scale": scale_table, "scenarios": scenarios_table}
+def tm_reach_table(csv: Path = RESULTS / "tm_reach.csv") -> str:
+    """The time-indexed reach-claims TM case: medians over the measured steps per fleet and variant."""
+    df = pd.read_csv(csv)
+    head = ("| fleet (target / active) | requesting | policy | current claims | decision CPU (ms) "
+            "| decision wall median / p90 (ms) | claims + boxes / broad / narrow / select (ms, wall) | reused "
+            "| grants lost |")
+    lines = [head, "| " + " | ".join(["---"] * 9) + " |"]
+    for _, r in df.iterrows():
+        lines.append(f"| {int(r['fleet'])} / {_count(r['vehicles'])} | {_count(r['requesting'])} | {r['policy']} "
+                     f"| {r['claims']} | {_f(r['decide_cpu_ms'], 1)} "
+                     f"| {_f(r['decide_ms'], 1)} / {_f(r['p90_decide_ms'], 1)} "
+                     f"| {_f(r['claims_ms'], 1)} / {_f(r['broad_ms'], 2)} / {_f(r['narrow_ms'], 2)} / "
+                     f"{_f(r['select_ms'], 2)} | {_count(r['reused'])} | {_count(r['grants_lost'])} |")
+    return "\n".join(lines)
+
+
+TABLES = {"traffic": traffic_table, "scale": scale_table, "scenarios": scenarios_table, "tm_reach": tm_reach_table}
 
 
 def render(text: str) -> str:

@@ -41,6 +41,7 @@ from tm.claims import Claims
 from tm.reach import ReachClaims, world_aabb
 from tm.reach_book import ReachBook, admit_reach, footprint_claims
 from tm.authority_gate import AuthorityGate, AuthorityReach
+from tm.reach_cache import ClaimCache
 from tm.junctions import ClassReach, JunctionFleet, JunctionGate, Zone
 from tm.manager import FleetState, TrafficManager
 from tm.pedestrians import STRIPING_SPEED_FACTOR, PedestrianRule, footprint_contacts
@@ -224,6 +225,9 @@ class Cosim:
         #: claim models (authority mode): reach-tightened, time-indexed claims (tm.reach_book)
         self.reach = ReachBook(self.families, {c: (vc.length, vc.width) for c, vc in self.classes.items()}) \
             if self.authority else None
+        #: current claims reused between steps where sound (tm.reach_cache; authority mode; set None
+        #: to decide on fresh claims every step)
+        self.claim_cache = ClaimCache(self.reach) if self.authority else None
         sp = settings.speed
         self.groups = {c: _Group(vc, STMPC(self.families[c], cs), decel=_look_ahead_decel(vc),
                                  slack_steps=sp.slack_steps) for c, vc in self.classes.items()}
@@ -334,7 +338,7 @@ class Cosim:
         requests into a junction guard without its token withheld (:meth:`_gate`)."""
         state = self._fleet(with_requests=True)
         self._link_state = None
-        self._claims_now = self._reach_claims() if self.authority and state is not None else None
+        self._claims_now = self._current_claims() if self.authority and state is not None else None
         if state is not None and len(self.signal_book):
             state = self._signals(state)
         elif self.junctions.standing:
@@ -495,6 +499,21 @@ class Cosim:
         (once per step: the pedestrian rule and the TM's decision share them)."""
         return self._cached_requests(state, "reach", lambda st: (self._reach_claims(st), None))[1]
 
+    def _current_claims(self) -> ReachClaims:
+        """Authority mode: every vehicle's reach claims now, in fleet order: from :class:`ClaimCache`
+        (the monitor's claims of this same state, or shifted where sound) or, without a cache, fresh."""
+        cache = self.claim_cache
+        return cache.current(self.t, self._claim_parts()) if cache is not None else self._reach_claims()
+
+    def _claim_parts(self) -> list:
+        """Every vehicle's current claim inputs with ids, in fleet order (for :class:`ClaimCache`)."""
+        parts = []
+        for c, g in self.groups.items():
+            if g.ids:
+                cen, hd, _ = g.centres()
+                parts.append((c, g.ids, g.X, cen, hd, g.l))
+        return parts
+
     def _entry_claims(self, ready: list[VehicleSpec], cand: FleetState, with_index: bool = False):
         """Reach claims of the ready vehicles at rest on their first waypoints (in ``ready``'s order);
         with ``with_index``: also their membership indices."""
@@ -526,8 +545,12 @@ class Cosim:
         if state is not None:
             # 2. TM: Go/Stop for every request
             td = time.perf_counter()
-            dec = self.tm.decide_reach(state, self._claims_now, self._requested_reach(state)) \
-                if self.authority else self.tm.decide(state)
+            if self.authority:  # current claims: this step's (from the cache, _requests); requested fresh
+                dec = self.tm.decide_reach(state, self._claims_now, self._requested_reach(state))
+                if self.claim_cache is not None:
+                    self.claim_cache.commit(dec.go)
+            else:
+                dec = self.tm.decide(state)
             ms_decide = (time.perf_counter() - td) * 1e3
             self.last_decision = dec
             ms_tm = (time.perf_counter() - tt) * 1e3
@@ -606,8 +629,10 @@ class Cosim:
         cur = self._fleet(with_requests=False)
         if cur is not None:
             pos = np.vstack([g.X[:, :2] for g in self.groups.values() if g.ids])
-            ms = self.monitor.step(cur.ids, pos, cur.heading, cur.length, cur.width,
-                                   claims=self._reach_claims() if self.authority else self.tm.claims(cur))
+            fresh = self._reach_claims() if self.authority else self.tm.claims(cur)
+            if self.claim_cache is not None:  # the same state decides next step: its claims, as they are
+                self.claim_cache.offer(self.t, self._claim_parts(), fresh)
+            ms = self.monitor.step(cur.ids, pos, cur.heading, cur.length, cur.width, claims=fresh)
             self.world.push(list(cur.ids), pos, cur.heading)
             if np.isfinite(ms.min_separation) and ms.closest_pair:
                 for v in ms.closest_pair:

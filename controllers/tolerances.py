@@ -75,3 +75,13 @@ AUTHORITY_TABLE_TOL = 1e-6
 #: the class's speed bound; the tube index then keeps the slack the bound needs
 #: (:meth:`bridge.groups._Group.slack`).
 SPEED_BOUND_TOL = 1e-6
+
+#: Outward margin (m/s) on the velocity bounds at which the reach claims read the authority
+#: tables (tm/reach.py: ``h`` at ``v_hi + margin``, ``g`` at ``v_lo - margin``; both tables are
+#: non-increasing, so the boxes only grow).  Without it a velocity bound that sits on a grid point
+#: of the tables (a disturbance at a vertex of D makes the bounds of consecutive steps coincide)
+#: is read on either side of it depending on ~1e-15 of rounding, and the fresh claim of the next
+#: step could exceed the shifted one by a grid step of the table (measured: 1.15 cm, a truck
+#: under a constant vertex disturbance), breaking S_k(t+1) ⊆ S_{k+1}(t), which claim reuse
+#: (tm/reach_cache.py) relies on.  1e-9 m/s moves a box by < 1e-7 m (table slopes < 100 s).
+REACH_LOOKUP_MARGIN = 1e-9

@@ -55,6 +55,11 @@ class LaneSettings:
         ``front``: requests granted front to back, each against every claim (this step's grants
         included); ``greedy``, ``optimal``: the traffic manager's policies
         (:meth:`tm.manager.TrafficManager.decide_reach`).
+    reuse : bool
+        With ``greedy`` or ``optimal``: the TM decides on the current claims of
+        :class:`tm.reach_cache.ClaimCache` (shifted claims of the previous step where they are
+        sound, :mod:`tm.reach_cache`) instead of fresh ones; after every decision the fresh claims
+        (granted: their new ones) are also checked pairwise (``claim_overlaps``).
     """
 
     check: str = "timed"
@@ -62,6 +67,7 @@ class LaneSettings:
     seed: int = 0
     v_entry: float = 13.89
     policy: str = "front"
+    reuse: bool = False
 
     def __post_init__(self) -> None:
         if self.check not in ("timed", "union"):
@@ -70,6 +76,8 @@ class LaneSettings:
             raise ValueError(f"LaneSettings.disturbance: must be one of {POLICIES}, got {self.disturbance!r}")
         if self.policy not in ("front", "greedy", "optimal"):
             raise ValueError(f"LaneSettings.policy: must be 'front', 'greedy' or 'optimal', got {self.policy!r}")
+        if self.reuse and self.policy == "front":
+            raise ValueError("LaneSettings.reuse: needs policy 'greedy' or 'optimal' (the traffic manager)")
         if not self.v_entry >= 0:
             raise ValueError(f"LaneSettings.v_entry: must be >= 0 m/s, got {self.v_entry}")
 
@@ -117,6 +125,7 @@ class Lane:
         self.stop_k: int | None = None  # red light: no waypoint beyond this index
         self.next_id = 0
         self._tm = None
+        self._cache = None      # ClaimCache (settings.reuse), built with the first decision
         self.deny_all = False  # the TM that grants nothing (its claims must stay disjoint)
         self.invariant_violations = 0
         self.footprint_overlaps = 0
@@ -321,7 +330,12 @@ class Lane:
                            length=[v.cls.vclass.length for v in self.vehicles],
                            width=[v.cls.vclass.width for v in self.vehicles], requesting=want,
                            req_centre=self._c(k_new), req_index=lp, req_heading=np.zeros(n))
+        fresh = cur
+        if self.settings.reuse:
+            cur = self._cached_claims()
         dec = self._tm_for().decide_reach(state, cur, new)
+        if self.settings.reuse:
+            self._cache.commit(dec.go)
         for r, i in enumerate(req):
             if dec.go[i]:
                 v = self.vehicles[i]
@@ -330,6 +344,31 @@ class Lane:
                 self.grants += 1
         ci, _ = pairwise_conflicts(dec.claims, self.settings.check)
         self.claim_overlaps += len(ci)
+        if self.settings.reuse:  # what fresh claims say of the decision taken on cached ones
+            after = ReachClaims.concat(*[v.claim if dec.go[i] else fresh.take([i]) for i, v in enumerate(self.vehicles)])
+            ci, _ = pairwise_conflicts(after, self.settings.check)
+            self.claim_overlaps += len(ci)
+
+    def _cached_claims(self) -> ReachClaims:
+        """Current claims of every vehicle from the claim cache (vehicle order: one part per run of a class)."""
+        from tm.reach_cache import ClaimCache
+
+        if self._cache is None or not {id(v.cls.reach) for v in self.vehicles} <= self._cache_models:
+            book = _LaneBook({v.cls.vclass.name: v.cls.reach for v in self.vehicles})
+            self._cache = ClaimCache(book)
+            self._cache_models = {id(m) for m in book.models.values()}
+        parts = []
+        for v in self.vehicles:
+            name = v.cls.vclass.name
+            if parts and parts[-1][0] == name:
+                parts[-1][1].append(str(v.vid))
+                parts[-1][2].append(v.x)
+                parts[-1][3].append(self._c(v.k)[0])
+                parts[-1][5].append(v.l)
+            else:
+                parts.append((name, [str(v.vid)], [v.x], [self._c(v.k)[0]], None, [v.l]))
+        parts = [(c, ids, np.array(X), np.array(C), np.zeros(len(ids)), np.array(L)) for c, ids, X, C, _, L in parts]
+        return self._cache.current(self.t, parts)
 
     def _disturbance(self, m, x, U, c, rank, n) -> np.ndarray:
         lo, hi = m.d_bounds
@@ -353,6 +392,17 @@ class Lane:
         gone = len(self.vehicles) - len(keep)
         self.vehicles = keep
         return gone
+
+
+class _LaneBook:
+    """The part of :class:`tm.reach_book.ReachBook` a claim cache needs, from the lane classes' models."""
+
+    def __init__(self, models: dict):
+        self.models = dict(models)
+
+    @property
+    def K(self) -> int:
+        return max(m.K for m in self.models.values())
 
 
 def _pad_to(a: np.ndarray, K: int) -> np.ndarray:

@@ -38,7 +38,8 @@ from controllers.tolerances import GEOMETRY_TOL
 from tm.claims import Claims, claim_conflicts, conflicting_pairs
 from tm.families import FamilyTable, build_family_table
 from tm.geometry import broad_phase
-from tm.reach import ReachClaims, claims_conflict, pad_slots, pairwise_conflicts, world_aabb
+from tm.reach import (PREFILTER_TOL_FACTOR, ReachClaims, claims_conflict, pad_slots, pairwise_conflicts,
+                      union_aabb, world_aabb)
 from tm.selection import propagate_stops, select_greedy, select_optimal
 from tm.settings import TMSettings
 
@@ -322,19 +323,26 @@ def _reach_conflicts(state: FleetState, cur: ReachClaims, new: ReachClaims, chec
     if len(cur) != V or len(new) != R:
         raise ValueError(f"decide_reach: {len(cur)} current claims for {V} vehicles and {len(new)} new claims "
                          f"for {R} requesters")
-    allc = ReachClaims.concat(cur, new)
+    timed = check == "timed"
     owner = np.concatenate([np.arange(V), req])
-    lo, hi = world_aabb(allc)
+    box = union_aabb if timed else world_aabb   # union_aabb: from the slot boxes (computed once, or cached)
+    (lo_c, hi_c), (lo_n, hi_n) = box(cur), box(new)
+    lo, hi = np.concatenate([lo_c, lo_n]), np.concatenate([hi_c, hi_n])
     empty = ~(lo <= hi).all(axis=1)
     lo, hi = np.where(empty[:, None], 0.0, lo), np.where(empty[:, None], 0.0, hi)  # never hit (narrow phase)
     t1 = time.perf_counter()
-    a, b = broad_phase(lo, hi, GEOMETRY_TOL, mask=np.arange(V + R) >= V)
+    # slot boxes meeting under the separating-axis test with tol lie within sqrt(2) tol (tm.reach)
+    a, b = broad_phase(lo, hi, PREFILTER_TOL_FACTOR * GEOMETRY_TOL if timed else GEOMETRY_TOL,
+                       mask=np.arange(V + R) >= V)
     swap = a < V
     a, b = np.where(swap, b, a), np.where(swap, a, b)
     keep = owner[a] != owner[b]
     a, b = a[keep], b[keep]
     t2 = time.perf_counter()
-    hit = claims_conflict(allc, a, allc, b, check) if len(a) else np.zeros(0, dtype=bool)
+    hit = np.zeros(len(a), dtype=bool)  # the new claim a against a current (b < V) or a new one
+    for rows, other, off in ((b < V, cur, 0), (b >= V, new, V)):
+        if rows.any():
+            hit[rows] = claims_conflict(new, a[rows] - V, other, b[rows] - off, check)
     a, b = a[hit], b[hit]
     t3 = time.perf_counter()
     return _sorted_conflicts(state, req, cur, new, owner, a, b, (t1 - t0, t2 - t1, t3 - t2))

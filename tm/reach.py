@@ -31,15 +31,24 @@ against a vehicle that stops instantly).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
 from controllers.authority import AuthorityTables
 from controllers.synthesis import SetFamily, along_factor, rotate_pairs
-from controllers.tolerances import GEOMETRY_TOL
+from controllers.tolerances import GEOMETRY_TOL, REACH_LOOKUP_MARGIN
+from tm.geometry import broad_phase
 
 __all__ = ["ReachModel", "ReachClaims", "reach_claims", "claims_conflict", "pairwise_conflicts", "world_aabb",
-           "candidate_pairs", "pad_slots"]
+           "candidate_pairs", "pad_slots", "slot_aabb", "union_aabb", "PREFILTER_TOL_FACTOR"]
+
+#: The per-slot world bounding boxes that pre-filter the ``timed`` check are compared with
+#: ``PREFILTER_TOL_FACTOR * tol``: two oriented boxes that the separating-axis test with ``tol``
+#: calls overlapping have world boxes within ``sqrt(2) tol`` (grow one box by ``tol`` along its own
+#: axes: the grown box meets the other, and its world box is at most ``(|cos| + |sin|) tol`` larger),
+#: so the pre-filter never drops a pair the test would report.
+PREFILTER_TOL_FACTOR = 2.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -125,23 +134,50 @@ class ReachClaims:
     def __len__(self) -> int:
         return len(self.centre)
 
+    @cached_property
+    def slot_boxes(self) -> np.ndarray:
+        """World bounding boxes of every slot, ``(4, n, K)``: ``x_lo, x_hi, y_lo, y_hi`` (empty
+        slots inverted: ``+inf, -inf``); computed on first use, carried by :meth:`shift`,
+        :meth:`take` and :meth:`concat` when present."""
+        return slot_aabb(self.centre, self.heading, self.lo, self.hi)
+
+    def _with_boxes(self, boxes) -> "ReachClaims":
+        if boxes is not None:
+            self.__dict__["slot_boxes"] = boxes  # the cached_property's slot (frozen dataclass)
+        return self
+
+    def _boxes(self) -> np.ndarray | None:
+        return self.__dict__.get("slot_boxes")
+
     def shift(self) -> "ReachClaims":
         """``S_{k+1}(t)`` as the claims for ``t + 1`` (reuse for vehicles not granted):
         drop slot 1, repeat the last (``T^0``, every later step)."""
         lo = np.concatenate([self.lo[:, 1:], self.lo[:, -1:]], axis=1)
         hi = np.concatenate([self.hi[:, 1:], self.hi[:, -1:]], axis=1)
-        return ReachClaims(self.centre, self.heading, lo, hi)
+        b = self._boxes()
+        return ReachClaims(self.centre, self.heading, lo, hi)._with_boxes(
+            None if b is None else np.concatenate([b[:, :, 1:], b[:, :, -1:]], axis=2))
 
     def take(self, idx) -> "ReachClaims":
-        return ReachClaims(self.centre[idx], self.heading[idx], self.lo[idx], self.hi[idx])
+        b = self._boxes()
+        return ReachClaims(self.centre[idx], self.heading[idx], self.lo[idx], self.hi[idx])._with_boxes(
+            None if b is None else np.take(b, idx, axis=1))
 
     @staticmethod
     def concat(*parts: "ReachClaims") -> "ReachClaims":
         K = max(p.lo.shape[1] for p in parts)
-        def pad(a):  # pad with the last slot (it stands for every later step)
-            return np.concatenate([a, np.repeat(a[:, -1:], K - a.shape[1], axis=1)], axis=1)
-        return ReachClaims(np.concatenate([p.centre for p in parts]), np.concatenate([p.heading for p in parts]),
-                           np.concatenate([pad(p.lo) for p in parts]), np.concatenate([pad(p.hi) for p in parts]))
+        def pad(a, axis=1):  # pad with the last slot (it stands for every later step)
+            extra = K - a.shape[axis]
+            if not extra:
+                return a
+            last = a[:, -1:] if axis == 1 else a[:, :, -1:]
+            return np.concatenate([a, np.repeat(last, extra, axis=axis)], axis=axis)
+        boxes = [p._boxes() for p in parts]
+        out = ReachClaims(np.concatenate([p.centre for p in parts]), np.concatenate([p.heading for p in parts]),
+                          np.concatenate([pad(p.lo) for p in parts]), np.concatenate([pad(p.hi) for p in parts]))
+        if all(b is not None for b in boxes):
+            out._with_boxes(np.concatenate([pad(b, axis=2) for b in boxes], axis=1))
+        return out
 
     def world_corners(self, i: int, k: int) -> np.ndarray:
         """Corners (4, 2) of box ``S_k`` of vehicle ``i`` in the world (``k >= 1``)."""
@@ -178,35 +214,39 @@ def reach_claims(rm: ReachModel, X: np.ndarray, centre: np.ndarray, heading: np.
     E = rotate_pairs(X - np.hstack([centre, np.zeros((n, 2))]), -heading)  # segment frame, error
     k = np.arange(1, K + 1)
     m = np.maximum(index[:, None] - k[None, :], 0)                      # (n, K)
-    # reach intervals per factor: centre A^k e, radius r_k
-    ca = np.einsum("kij,nj->nki", rm.Ak_al[1:], E[:, [0, 2]])
-    cy = np.einsum("kij,nj->nki", rm.Ak_ac[1:], E[:, [1, 3]])
-    ra, ry = rm.r_al[1:], rm.r_ac[1:]
-    Kr = ca.shape[1]  # K - 1 reach slots; the last slot is T^0 whole
-    p_lo, p_hi = ca[..., 0] - ra[None, :, 0], ca[..., 0] + ra[None, :, 0]
-    v_lo = np.maximum(ca[..., 1] - ra[None, :, 1], T.v_lo[m[:, :Kr]])
-    v_hi = np.minimum(ca[..., 1] + ra[None, :, 1], T.v_hi[m[:, :Kr]])
+    Kr = K - 1  # reach slots; the last slot is T^0 whole
     mm = m[:, :Kr]
-    a_lo = np.maximum(np.maximum(p_lo, T.h(mm, v_hi)), T.p_lo[mm])
-    a_hi = np.minimum(np.minimum(p_hi, T.g(mm, v_lo)), T.p_hi[mm])
-    y_lo = np.maximum(cy[..., 0] - ry[None, :, 0], T.y_lo[mm])
-    y_hi = np.minimum(cy[..., 0] + ry[None, :, 0], T.y_hi[mm])
-    lo = np.empty((n, K, 2))
-    hi = np.empty((n, K, 2))
-    lo[:, :Kr, 0], hi[:, :Kr, 0], lo[:, :Kr, 1], hi[:, :Kr, 1] = a_lo, a_hi, y_lo, y_hi
-    lo[:, Kr:, 0], hi[:, Kr:, 0] = T.p_lo[0], T.p_hi[0]
-    lo[:, Kr:, 1], hi[:, Kr:, 1] = T.y_lo[0], T.y_hi[0]
+    # reach intervals per factor: centre A^k e, radius r_k (planar (n, Kr) arrays: contiguous)
+    Aa, Ac = rm.Ak_al[1:], rm.Ak_ac[1:]
+    ra, ry = rm.r_al[1:], rm.r_ac[1:]
+    cp = np.outer(E[:, 0], Aa[:, 0, 0]) + np.outer(E[:, 2], Aa[:, 0, 1])
+    cv = np.outer(E[:, 0], Aa[:, 1, 0]) + np.outer(E[:, 2], Aa[:, 1, 1])
+    cy = np.outer(E[:, 1], Ac[:, 0, 0]) + np.outer(E[:, 3], Ac[:, 0, 1])
+    v_lo = np.maximum(cv - ra[:, 1], T.v_lo[mm])
+    v_hi = np.minimum(cv + ra[:, 1], T.v_hi[mm])
     off = np.broadcast_to(np.asarray(body_offset, dtype=float), (n,))
     c, s = np.abs(np.cos(off)), np.abs(np.sin(off))
-    fx = 0.5 * (rm.length * c + rm.width * s)
-    fy = 0.5 * (rm.length * s + rm.width * c)
-    empty = (lo[..., 0] > hi[..., 0]) | (lo[..., 1] > hi[..., 1])
-    lo[..., 0] -= fx[:, None]
-    hi[..., 0] += fx[:, None]
-    lo[..., 1] -= fy[:, None]
-    hi[..., 1] += fy[:, None]
-    lo[empty], hi[empty] = np.inf, -np.inf  # keep empty boxes empty after the footprint
-    return ReachClaims(centre, heading, lo, hi)
+    fx = (0.5 * (rm.length * c + rm.width * s))[:, None]
+    fy = (0.5 * (rm.length * s + rm.width * c))[:, None]
+    P = np.empty((4, n, K))  # along lo, hi, across lo, hi (segment frame, footprint added below)
+    # tables read just outside the velocity bounds (REACH_LOOKUP_MARGIN: ties at grid points)
+    np.maximum(np.maximum(cp - ra[:, 0], T.h(mm, v_hi + REACH_LOOKUP_MARGIN)), T.p_lo[mm], out=P[0, :, :Kr])
+    np.minimum(np.minimum(cp + ra[:, 0], T.g(mm, v_lo - REACH_LOOKUP_MARGIN)), T.p_hi[mm], out=P[1, :, :Kr])
+    np.maximum(cy - ry[:, 0], T.y_lo[mm], out=P[2, :, :Kr])
+    np.minimum(cy + ry[:, 0], T.y_hi[mm], out=P[3, :, :Kr])
+    P[0, :, Kr:], P[1, :, Kr:] = T.p_lo[0], T.p_hi[0]
+    P[2, :, Kr:], P[3, :, Kr:] = T.y_lo[0], T.y_hi[0]
+    empty = (P[0] > P[1]) | (P[2] > P[3])
+    P[0] -= fx
+    P[1] += fx
+    P[2] -= fy
+    P[3] += fy
+    if empty.any():  # keep empty boxes empty after the footprint
+        P[0][empty] = P[2][empty] = np.inf
+        P[1][empty] = P[3][empty] = -np.inf
+    lo = np.stack([P[0], P[2]], axis=-1)
+    hi = np.stack([P[1], P[3]], axis=-1)
+    return ReachClaims(centre, heading, lo, hi)._with_boxes(_slot_aabb_planar(centre, heading, *P))
 
 
 def pad_slots(c: ReachClaims, K: int) -> ReachClaims:
@@ -217,7 +257,9 @@ def pad_slots(c: ReachClaims, K: int) -> ReachClaims:
     if k > K:
         raise ValueError(f"pad_slots: claims have {k} slots, more than {K}")
     rep = lambda a: np.concatenate([a, np.repeat(a[:, -1:], K - k, axis=1)], axis=1)  # noqa: E731
-    return ReachClaims(c.centre, c.heading, rep(c.lo), rep(c.hi))
+    b = c._boxes()
+    return ReachClaims(c.centre, c.heading, rep(c.lo), rep(c.hi))._with_boxes(
+        None if b is None else np.concatenate([b, np.repeat(b[:, :, -1:], K - k, axis=2)], axis=2))
 
 
 def _obb(ci, hi_, c, s, lo, hi):
@@ -246,6 +288,51 @@ def _boxes_overlap(ca, ha, la, ua, cb, hb, lb, ub, tol):
     return ~(sep | empty)
 
 
+def _padded_boxes(c: ReachClaims, K: int) -> np.ndarray:
+    b = c.slot_boxes
+    return b if b.shape[2] == K else np.concatenate([b, np.repeat(b[:, :, -1:], K - b.shape[2], axis=2)], axis=2)
+
+
+def _slot_sat(a: ReachClaims, i, b: ReachClaims, j, k, tol: float) -> np.ndarray:
+    """The separating-axis test of slot ``k[t]`` of ``a[i[t]]`` and ``b[j[t]]`` (slots past a
+    shorter horizon are its last slot)."""
+    ka, kb = np.minimum(k, a.lo.shape[1] - 1), np.minimum(k, b.lo.shape[1] - 1)
+    return _boxes_overlap(a.centre[i], a.heading[i], a.lo[i, ka], a.hi[i, ka],
+                          b.centre[j], b.heading[j], b.lo[j, kb], b.hi[j, kb], tol)
+
+
+def _timed_conflicts(a: ReachClaims, i, b: ReachClaims, j, tol: float) -> np.ndarray:
+    """``timed`` check: slot boxes (world, :attr:`ReachClaims.slot_boxes`) first, vectorised over
+    pairs and slots; the separating-axis test then on the first slot whose boxes meet, and on every
+    such slot of the pairs (rotated boxes only) where that one is separated."""
+    out = np.zeros(len(i), dtype=bool)
+    if not len(i):
+        return out
+    K = max(a.lo.shape[1], b.lo.shape[1])
+    A, B = _padded_boxes(a, K), _padded_boxes(b, K)
+    pad = PREFILTER_TOL_FACTOR * tol
+    m = A[0][i] <= B[1][j] + pad
+    m &= B[0][j] <= A[1][i] + pad
+    m &= A[2][i] <= B[3][j] + pad
+    m &= B[2][j] <= A[3][i] + pad
+    p = np.flatnonzero(m.any(axis=1))
+    if not len(p):
+        return out
+    mp = m[p]
+    first = mp.argmax(axis=1)
+    hit = _slot_sat(a, i[p], b, j[p], first, tol)
+    out[p[hit]] = True
+    rest = np.flatnonzero(~hit)
+    if len(rest):
+        mp[rest, first[rest]] = False
+        r, k = np.nonzero(mp[rest])
+        if len(r):
+            q = p[rest[r]]
+            h = _slot_sat(a, i[q], b, j[q], k, tol)
+            out[q[h]] = True
+    return out
+
+
 def claims_conflict(a: ReachClaims, i, b: ReachClaims, j, check: str = "timed",
                     tol: float = GEOMETRY_TOL) -> np.ndarray:
     """Whether claims ``a[i[t]]`` and ``b[j[t]]`` meet, for each pair ``t``.
@@ -256,33 +343,75 @@ def claims_conflict(a: ReachClaims, i, b: ReachClaims, j, check: str = "timed",
     i = np.atleast_1d(np.asarray(i, dtype=np.intp))
     j = np.atleast_1d(np.asarray(j, dtype=np.intp))
     if check == "timed":
-        K = max(a.lo.shape[1], b.lo.shape[1])
-        def sl(c, v):  # pad the shorter horizon with its last slot (it stands for every later step)
-            lo, hi = c.lo[v], c.hi[v]
-            pad = K - lo.shape[1]
-            return (np.concatenate([lo, np.repeat(lo[:, -1:], pad, axis=1)], axis=1),
-                    np.concatenate([hi, np.repeat(hi[:, -1:], pad, axis=1)], axis=1))
-        la, ua = sl(a, i)
-        lb, ub = sl(b, j)
-        hit = _boxes_overlap(a.centre[i][:, None], a.heading[i][:, None], la, ua,
-                             b.centre[j][:, None], b.heading[j][:, None], lb, ub, tol)
-        return hit.any(axis=1)
+        return _timed_conflicts(a, i, b, j, tol)
     if check == "union":
-        def hull(c, v):
-            lo, hi = c.lo[v], c.hi[v]
-            ok = (lo <= hi).all(axis=-1, keepdims=True)
-            return np.where(ok, lo, np.inf).min(axis=1), np.where(ok, hi, -np.inf).max(axis=1)
-        la, ua = hull(a, i)
-        lb, ub = hull(b, j)
+        la, ua = _hull(a.lo[i], a.hi[i])
+        lb, ub = _hull(b.lo[j], b.hi[j])
         return _boxes_overlap(a.centre[i], a.heading[i], la, ua, b.centre[j], b.heading[j], lb, ub, tol)
     raise ValueError(f"check must be 'timed' or 'union', got {check!r}")
 
 
+def _hull(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Segment-frame bounding boxes (n, 2) of the non-empty slots of ``lo, hi`` (n, K, 2) (no slot:
+    inverted); per coordinate, as a reduction over the slot axis of (n, K, 2) is slow."""
+    ok = (lo[..., 0] <= hi[..., 0]) & (lo[..., 1] <= hi[..., 1])
+    out_lo = np.stack([np.where(ok, lo[..., d], np.inf).min(axis=1) for d in (0, 1)], axis=1)
+    out_hi = np.stack([np.where(ok, hi[..., d], -np.inf).max(axis=1) for d in (0, 1)], axis=1)
+    return out_lo, out_hi
+
+
+def slot_aabb(centre, heading, lo, hi) -> np.ndarray:
+    """World bounding boxes ``(4, n, K)`` (``x_lo, x_hi, y_lo, y_hi``) of boxes ``centre + R(heading)
+    [lo, hi]`` (lo, hi (n, K, 2)); empty boxes inverted (``+inf, -inf``)."""
+    return _slot_aabb_planar(centre, heading, lo[..., 0], hi[..., 0], lo[..., 1], hi[..., 1])
+
+
+def _slot_aabb_planar(centre, heading, l0, h0, l1, h1) -> np.ndarray:
+    """:func:`slot_aabb` from the corners' coordinates, each (n, K)."""
+    n, K = l0.shape
+    c, s = np.cos(heading)[:, None], np.sin(heading)[:, None]
+    ac, as_ = np.abs(c), np.abs(s)
+    out = np.empty((4, n, K))
+    with np.errstate(invalid="ignore"):  # empty boxes (inf, -inf): fixed below
+        mx = l0 + h0
+        mx *= 0.5
+        my = l1 + h1
+        my *= 0.5
+        hx = h0 - l0
+        hx *= 0.5
+        hy = h1 - l1
+        hy *= 0.5
+        wx = c * mx
+        wx -= s * my
+        wx += centre[:, :1]
+        wy = s * mx
+        wy += c * my
+        wy += centre[:, 1:]
+        ex = ac * hx
+        ex += as_ * hy
+        ey = as_ * hx
+        ey += ac * hy
+        np.subtract(wx, ex, out=out[0])
+        np.add(wx, ex, out=out[1])
+        np.subtract(wy, ey, out=out[2])
+        np.add(wy, ey, out=out[3])
+        empty = ~((hx >= 0) & (hy >= 0))
+    if empty.any():
+        out[0][empty] = out[2][empty] = np.inf
+        out[1][empty] = out[3][empty] = -np.inf
+    return out
+
+
+def union_aabb(claims: ReachClaims) -> tuple[np.ndarray, np.ndarray]:
+    """World bounding boxes (n, 2) of the union of every vehicle's slot boxes (inverted when all are
+    empty): inside :func:`world_aabb`, enough for the ``timed`` check (a conflict is a slot overlap)."""
+    b = claims.slot_boxes
+    return np.stack([b[0].min(axis=1), b[2].min(axis=1)], axis=1), np.stack([b[1].max(axis=1), b[3].max(axis=1)], axis=1)
+
+
 def world_aabb(claims: ReachClaims) -> tuple[np.ndarray, np.ndarray]:
     """World bounding boxes (n, 2) of every vehicle's ``∪_k S_k`` (empty claims: inverted boxes)."""
-    ok = (claims.lo <= claims.hi).all(axis=-1, keepdims=True)
-    lo = np.where(ok, claims.lo, np.inf).min(axis=1)
-    hi = np.where(ok, claims.hi, -np.inf).max(axis=1)
+    lo, hi = _hull(claims.lo, claims.hi)
     c, s = np.abs(np.cos(claims.heading)), np.abs(np.sin(claims.heading))
     mid = claims.centre + rotate_pairs(0.5 * (lo + hi), claims.heading)
     half = 0.5 * (hi - lo)
@@ -298,12 +427,12 @@ def candidate_pairs(lo_a, hi_a, lo_b, hi_b, tol: float = GEOMETRY_TOL) -> tuple[
 
 
 def pairwise_conflicts(claims: ReachClaims, check: str = "timed") -> tuple[np.ndarray, np.ndarray]:
-    """All pairs ``i < j`` of ``claims`` that conflict (dense broad phase on the union boxes, then
-    :func:`claims_conflict`; for lanes and tests)."""
+    """All pairs ``i < j`` of ``claims`` that conflict (grid broad phase on the union boxes, then
+    :func:`claims_conflict`; the monitor, ``verify``, lanes and tests)."""
     lo, hi = world_aabb(claims)
-    i, j = candidate_pairs(lo, hi, lo, hi)
-    keep = i < j
-    i, j = i[keep], j[keep]
+    empty = ~(lo <= hi).all(axis=1)
+    lo, hi = np.where(empty[:, None], 0.0, lo), np.where(empty[:, None], 0.0, hi)  # never hit (narrow phase)
+    i, j = broad_phase(lo, hi, PREFILTER_TOL_FACTOR * GEOMETRY_TOL)
     if not len(i):
         return i, j
     hit = claims_conflict(claims, i, claims, j, check)

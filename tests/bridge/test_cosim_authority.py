@@ -84,7 +84,8 @@ def authority_scenarios(draw):
 def test_authority_mode_is_safe(scenario):
     """Random crossings, merges and queues of cars, buses or trucks, random TM policies, checks and
     disturbance policies (adversarial included): no footprint overlap, reach claims pairwise
-    disjoint after every step, the index invariant holds, x(t+1) always inside S_1(t)."""
+    disjoint after every step, the index invariant holds, x(t+1) always inside S_1(t); the TM decided
+    on the monitor's fresh claims of the same state (tm.reach_cache offer), never recomputed."""
     kind, specs, opts = scenario
     sim = Cosim(CLASSES, specs, opts)
     sim.run(max_steps=900)
@@ -96,6 +97,8 @@ def test_authority_mode_is_safe(scenario):
     assert figures["constraint_violations"] == 0
     assert figures["tube_escapes"] == 0
     assert sim.monitor.steps > 0
+    st = sim.claim_cache.stats
+    assert st.offered > 0 and st.reused == 0 and st.fresh <= len(specs)  # fresh: the first decision only
 
 
 def test_crossing_authority_all_arrive_and_safe():
