@@ -52,6 +52,13 @@ def swap(n: int, vclass: str, delta: float, radius: float | None = None,
     replanning) the paths go round a central ring counter-clockwise, like a
     roundabout: in along the start's spoke, half a turn on the ring, out along
     the opposite spoke.  Entry and exit spokes alternate with the vehicles.
+
+    The spokes meet the ring at 90 deg: for road-frame classes pass ``turn_max_deg`` and
+    the corners are cut (:func:`subsample`).  Known limit (measured, seed 7, 16 vehicles,
+    paper mode, paper-a, disturbance none or random): the paper's TM deadlocks at four
+    merges - a ring vehicle and the vehicle on the next spoke stop with each one's next
+    claim meeting the other's held claim; adversarial disturbances, or odd vehicles
+    departing 2-5 s later, avoid it.
     """
     if n < 2:
         raise ValueError(f"swap: needs at least 2 vehicles, got {n}")
