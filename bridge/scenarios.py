@@ -99,7 +99,7 @@ def run_multi(name: str, out: Path, opts, world=None, specs=None) -> dict:
     from controllers.speed_limits import SpeedSettings
     from bridge.cosim import Cosim, CosimSettings
     from bridge.cosim import VehicleSpec
-    from bridge.layouts import crossing, paper10, subsample, swap
+    from bridge.layouts import crossing, paper10, subsample, swap, turn_bound
     from controllers.classes import ClassError, builtin_classes
     from controllers.synthesis import SynthesisError
     from tm.settings import TMSettings
@@ -113,14 +113,18 @@ def run_multi(name: str, out: Path, opts, world=None, specs=None) -> dict:
             raise ScenarioRunError(f"--vehicles: {name} needs at least {2 if name == 'swap' else 1} vehicle(s), "
                                    f"got {opts.vehicles}")
         if name == "paper10":
-            specs = paper10({c: classes[c].model.delta for c in classes})
+            specs = paper10({c: classes[c].model.delta for c in classes},
+                            {c: turn_bound(classes[c].model) for c in classes})
         elif name == "swap":
-            specs = swap(opts.vehicles, opts.vclass, classes[opts.vclass].model.delta)
+            specs = swap(opts.vehicles, opts.vclass, classes[opts.vclass].model.delta,
+                         turn_max_deg=turn_bound(classes[opts.vclass].model))
         elif name == "single":  # authority mode: one vehicle alone on a 600 m straight
             specs = [VehicleSpec("single", opts.vclass, subsample([[0.0, 0.0], [600.0, 0.0]],
-                                                                   classes[opts.vclass].model.delta))]
+                                                                   classes[opts.vclass].model.delta,
+                                                                   turn_bound(classes[opts.vclass].model)))]
         elif name == "crossing":
-            specs, zones = crossing(max(opts.vehicles // 4, 1), opts.vclass, classes[opts.vclass].model.delta)
+            specs, zones = crossing(max(opts.vehicles // 4, 1), opts.vclass, classes[opts.vclass].model.delta,
+                                   turn_max_deg=turn_bound(classes[opts.vclass].model))
         else:
             raise ScenarioRunError(f"unknown scenario {name!r}; built-in scenarios: {', '.join(SCENARIOS)}")
     out.mkdir(parents=True, exist_ok=True)

@@ -42,6 +42,9 @@ __all__ = [
     "load_net",
     "route_waypoints",
     "subsample",
+    "ConditionedPath",
+    "condition_polyline",
+    "polyline_waypoints",
     "point_polyline_distance",
     "drop_slivers",
     "round_corners",
@@ -331,6 +334,91 @@ def subsample(polyline: np.ndarray, delta: float, corner_deg: float = 30.0) -> t
     return pts, s
 
 
+# --------------------------------------------------------------------------- conditioning
+
+@dataclass(frozen=True, eq=False)
+class ConditionedPath:
+    """A polyline conditioned for a vehicle class, and its waypoints (:func:`condition_polyline`).
+
+    Attributes
+    ----------
+    polyline : ndarray, shape (P, 2)
+        Slivers dropped, corners sharper than the class's bound cut.
+    waypoints : ndarray, shape (K, 2)
+        On ``polyline``, consecutive ones at most delta apart.
+    arc_length : ndarray, shape (K,)
+        Arc length of each waypoint along ``polyline`` (m).
+    segment_lanes : tuple, length P-1
+        The caller's label of each segment (lane id; None from :func:`polyline_waypoints`).
+    segment_on : tuple of bool, length P-1
+        Whether each segment is an unmodified part of the input (on its lane's centre line).
+    """
+
+    polyline: np.ndarray
+    waypoints: np.ndarray
+    arc_length: np.ndarray
+    segment_lanes: tuple
+    segment_on: tuple
+
+
+def condition_polyline(polyline: np.ndarray, delta: float, *, turn_max_deg: float | None = None,
+                       corner_deg: float = 30.0, lanes: Sequence | None = None,
+                       on: Sequence[bool] | None = None) -> ConditionedPath:
+    """The route-geometry conditioning every path gets, SUMO route or free-plane layout.
+
+    :func:`drop_slivers`, then (with ``turn_max_deg``) :func:`round_corners`, then
+    :func:`subsample` with ``corner_deg`` (at most ``turn_max_deg / 2``), then (with
+    ``turn_max_deg``) :func:`refine_turns`.
+
+    Parameters
+    ----------
+    polyline : ndarray, shape (P, 2)
+        Without repeated consecutive points.
+    delta : float
+        Maximum waypoint spacing (m).
+    turn_max_deg : float, optional
+        The class's largest accepted turn between segments (road-frame classes); None
+        (world-frame classes) leaves corners as they are.
+    corner_deg : float
+        Vertices turning more than this are waypoints (see :func:`subsample`).
+    lanes, on : sequence, optional
+        Per-segment labels carried through (default None and True).
+    """
+    poly = np.asarray(polyline, dtype=float)
+    n_seg = len(poly) - 1
+    lanes = list(lanes) if lanes is not None else [None] * n_seg
+    on = list(on) if on is not None else [True] * n_seg
+    poly, lanes, on = drop_slivers(poly, lanes, on)
+    if turn_max_deg is not None:
+        poly, lanes, on = round_corners(poly, lanes, on, turn_max_deg)
+        corner_deg = min(corner_deg, 0.5 * turn_max_deg)
+    wps, arc = subsample(poly, delta, corner_deg)
+    if turn_max_deg is not None:
+        wps, arc = refine_turns(poly, wps, arc, turn_max_deg)
+    return ConditionedPath(poly, wps, arc, tuple(lanes), tuple(bool(x) for x in on))
+
+
+def polyline_waypoints(points, delta: float, *, turn_max_deg: float | None = None,
+                       corner_deg: float = 30.0) -> np.ndarray:
+    """Lane-free entry to :func:`condition_polyline`: waypoints (K, 2) of a free-plane path.
+
+    Repeated consecutive points are merged first.
+
+    Raises
+    ------
+    ValueError
+        Fewer than two distinct points, or a bad ``delta``.
+    """
+    P = np.asarray(points, dtype=float)
+    if P.ndim != 2 or P.shape[1] != 2:
+        raise ValueError(f"points: must be (P, 2), got shape {P.shape}")
+    keep = np.concatenate([[True], np.hypot(*np.diff(P, axis=0).T) > _DUP_TOL]) if len(P) else np.zeros(0, bool)
+    P = P[keep]
+    if len(P) < 2:
+        raise ValueError("points: a path needs at least two distinct points")
+    return condition_polyline(P, delta, turn_max_deg=turn_max_deg, corner_deg=corner_deg).waypoints
+
+
 # --------------------------------------------------------------------------- the network
 
 @dataclass(frozen=True)
@@ -553,13 +641,10 @@ class NetGeometry:
         poly = np.asarray(pts, dtype=float)
         if len(poly) < 2:
             raise RouteError(f"{who}: route [{' '.join(edges)}] has zero length")
-        poly, seg_lane, seg_on = drop_slivers(poly, seg_lane, seg_on)
-        if turn_max_deg is not None:
-            poly, seg_lane, seg_on = round_corners(poly, seg_lane, seg_on, turn_max_deg)
-            corner_deg = min(corner_deg, 0.5 * turn_max_deg)
-        wps, arc = subsample(poly, delta, corner_deg)
-        if turn_max_deg is not None:
-            wps, arc = refine_turns(poly, wps, arc, turn_max_deg)
+        cond = condition_polyline(poly, delta, turn_max_deg=turn_max_deg, corner_deg=corner_deg,
+                                  lanes=seg_lane, on=seg_on)
+        poly, seg_lane, seg_on = cond.polyline, list(cond.segment_lanes), list(cond.segment_on)
+        wps, arc = cond.waypoints, cond.arc_length
         parc = _arc(poly)
         seg = np.clip(np.searchsorted(parc, arc, side="right") - 1, 0, len(poly) - 2)
         d = np.diff(poly, axis=0)
