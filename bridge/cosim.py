@@ -236,6 +236,11 @@ class Cosim:
         # traffic lights (tm.signals): the vehicles' stop lines; link states read once per step
         self.signal_book = SignalBook(settings.signals)
         self._link_state: np.ndarray | None = None
+        # SUMO's own bodies (bridge.sumo_body): per waypoint the claims' footprint padding
+        self._pads: dict[str, np.ndarray | None] = {}
+        #: Vehicle-steps (authority mode) with a position past the stretch of its waypoint's frame
+        #: the padding was computed for (``bridge.sumo_body.AHEAD_M`` beyond ``T^0``).
+        self.body_window_exits = 0
 
     # -------------------------------------------------------------- state
     def _fleet(self, with_requests: bool):
@@ -392,6 +397,30 @@ class Cosim:
             return state
         return replace(state, requesting=req)
 
+    def _spec_pads(self, sp: VehicleSpec) -> np.ndarray:
+        """The claims' footprint padding (K, 2) at every waypoint of ``sp``: how far the world's
+        own body reaches beyond the rectangle (``world.body_pads``, SUMO: :mod:`bridge.sumo_body`)
+        for every position the class's sets hold in a waypoint's frame (``T^N``'s projection, cut
+        :data:`~bridge.sumo_body.AHEAD_M` past ``T^0``); zeros without one or in paper mode."""
+        pads = self._pads.get(sp.id)
+        if pads is None:
+            fn = getattr(self.world, "body_pads", None)
+            if self.authority and fn is not None:
+                T = self.reach.models[sp.vclass].tables
+                lo = (float(T.p_lo[T.N]), float(T.y_lo[T.N]))
+                hi = (self._ahead(sp.vclass), float(T.y_hi[T.N]))
+                pads = fn(sp, lo, hi)
+            if pads is None:
+                pads = np.zeros((len(sp.waypoints), 2))
+            self._pads[sp.id] = pads
+        return pads
+
+    def _ahead(self, vclass: str) -> float:
+        """How far past its waypoint (along its frame) a vehicle's position may be for the padding."""
+        from bridge.sumo_body import AHEAD_M
+
+        return float(self.reach.models[vclass].tables.p_hi[0]) + AHEAD_M
+
     def _reach_claims(self, requests: FleetState | None = None) -> ReachClaims:
         """Reach claims (authority mode) of every vehicle for its current waypoint, in fleet order;
         with ``requests``: of its requesters for their requested waypoints."""
@@ -401,11 +430,11 @@ class Cosim:
                 continue
             if requests is None:
                 cen, hd, _ = g.centres()
-                parts.append((c, g.X, cen, hd, g.l))
+                parts.append((c, g.X, cen, hd, g.l, g.pads()))
             else:
                 r = np.asarray(requests.requesting[o:o + len(g.ids)], dtype=bool)
                 cen, hd, _ = g.centres(1)
-                parts.append((c, g.X[r], cen[r], hd[r], g.req_l[r]))
+                parts.append((c, g.X[r], cen[r], hd[r], g.req_l[r], g.pads(1)[r]))
             o += len(g.ids)
         return self.reach.claims(parts)
 
@@ -417,8 +446,9 @@ class Cosim:
             if len(idx):
                 X = self.classes[c].model.equilibrium(cand.centre[idx])
                 ctl = self.groups[c].ctl
+                pads = np.array([self._spec_pads(ready[i])[0] for i in idx]).reshape(-1, 2)
                 parts.append((c, X, cand.centre[idx], cand.heading[idx],
-                              ctl.index(X, cand.centre[idx], cand.heading[idx])))
+                              ctl.index(X, cand.centre[idx], cand.heading[idx]), pads))
                 rows.append(idx)
         inv = np.empty(len(ready), dtype=np.intp)
         inv[np.concatenate(rows)] = np.arange(len(ready))
@@ -485,8 +515,16 @@ class Cosim:
             g.steps += 1
         ms_ctl = (time.perf_counter() - tc) * 1e3
         if self.authority and state is not None:  # 4a. x(t+1) inside S_1(t) (tube escapes counted)
-            self.monitor.escapes(dec.claims, np.vstack([g.X[:, :2] for g in self.groups.values() if g.ids]),
-                                 state.length, state.width)
+            live = [g for g in self.groups.values() if g.ids]
+            self.monitor.escapes(dec.claims, np.vstack([g.X[:, :2] for g in live]),
+                                 state.length, state.width, pad=np.vstack([g.pads() for g in live]))
+            for c, g in self.groups.items():  # positions past the stretch the body padding covers
+                if not g.ids:
+                    continue
+                cen, hd, _ = g.centres()
+                d = g.X[:, :2] - cen
+                along = d[:, 0] * np.cos(hd) + d[:, 1] * np.sin(hd)
+                self.body_window_exits += int(np.sum(along > self._ahead(c)))
         self._count_red_crossings()  # 4b. stop lines crossed on red (front bumpers)
         self.t += 1
         t_next = self.t * s.Ts
@@ -509,8 +547,11 @@ class Cosim:
         cur = self._fleet(with_requests=False)
         if cur is not None:
             pos = np.vstack([g.X[:, :2] for g in self.groups.values() if g.ids])
+            bodies = getattr(self.world, "bodies", None)  # the world's own bodies (SUMO's), if it has them
+            polys = bodies(cur.ids, pos, cur.heading, cur.length, cur.width) if bodies is not None else None
             ms = self.monitor.step(cur.ids, pos, cur.heading, cur.length, cur.width,
-                                   claims=self._reach_claims() if self.authority else self.tm.claims(cur))
+                                   claims=self._reach_claims() if self.authority else self.tm.claims(cur),
+                                   polygons=polys)
             self.world.push(list(cur.ids), pos, cur.heading)
             if np.isfinite(ms.min_separation) and ms.closest_pair:
                 for v in ms.closest_pair:
@@ -570,7 +611,8 @@ class Cosim:
         if self.authority:  # the others' reach claims and their footprints now (condition (12))
             now = self._reach_claims() if len(cur.ids) else None
             pos = np.vstack([g.X[:, :2] for g in self.groups.values() if g.ids]) if now is not None else None
-            now = ReachClaims.concat(now, footprint_claims(pos, cur.heading, cur.length, cur.width)) \
+            pads = np.vstack([g.pads() for g in self.groups.values() if g.ids]) if now is not None else None
+            now = ReachClaims.concat(now, footprint_claims(pos, cur.heading, cur.length, cur.width, pad=pads)) \
                 if now is not None else footprint_claims(np.zeros((0, 2)), [], [], [])
             ok = admit_reach(now, self._entry_claims(ready, cand), self.settings.tm.check)
         else:
@@ -592,7 +634,8 @@ class Cosim:
             W = np.asarray(sp.waypoints, dtype=float)
             x0 = g.vclass.model.equilibrium(W[0])
             H = _headings(W)
-            g.add(sp.id, W, H, x0, int(g.ctl.index(x0[None], W[:1], H[:1])[0]))
+            g.add(sp.id, W, H, x0, int(g.ctl.index(x0[None], W[:1], H[:1])[0]),
+                  pads=self._spec_pads(sp) if self.authority else None)
             self.records[sp.id].admitted_s = t_s
             if sp.stop_lines is not None:
                 reach = self.junctions.classes[sp.vclass].hold + 0.5 * g.vclass.length

@@ -70,3 +70,9 @@ VERIFY_TOL = 1e-7
 #: lowered by this after computing them from the polygon's vertices (the edge interpolation
 #: at v = w rounds at ~1e-14 relative on values <= ~200 m).
 AUTHORITY_TABLE_TOL = 1e-6
+
+#: SUMO's front position after ``moveToXY(keepRoute=3)`` farther than this from the one pushed
+#: counts as a pose mismatch (``pose_mismatches``, a safety counter): SUMO then judges a body
+#: muvsim did not plan.  SUMO keeps the exact position (measured: to ~1e-14 m); 1 cm absorbs
+#: SUMO's own position validation on lane ends.
+POSE_TOL_M = 0.01

@@ -1,0 +1,246 @@
+"""SUMO's body of a vehicle that muvsim moves along its route, and the pose pushed for it.
+
+SUMO does not judge collisions between rigid bodies.  A vehicle is the box of width ``W``
+around the line from its FRONT position (``vehicle.getPosition``) to its BACK position, the
+point ``length`` behind the front along SUMO's lanes (the lane it is on, then the lanes behind
+it) at the front's lateral offset (``MSVehicle::getBoundingBox`` / ``getBackPosition``; the
+passenger shapes cut the box's corners, a subset).  The angle given to ``moveToXY`` only draws.
+So on a turn SUMO's body is the chord between two points of the lane, and in muvsim's
+lane-change diagonals it stays parallel to the lane.
+
+Measured (``grid``, authority, seed 1, before this module): muvsim pushed the front bumper of a
+rigid rectangle centred on the plant state along the heading of the current waypoint's segment,
+``moveToXY`` with ``keepRoute=1`` snapped it onto the lane's centre line, and SUMO's body lay up
+to 3.7 m (a bus in a right turn) from muvsim's; a truck's front 1.31 m off the lane in a left
+turn became a junction collision muvsim's geometry never saw (min separation 0.33 m).
+
+What this module does instead, for a plant position ``p`` (the body's reference point):
+
+* ``sigma, e``: ``p``'s arc position on the route polyline and its signed offset (left +);
+* front ``F = path(sigma + L/2) + e n``: pushed with ``keepRoute=3`` (SUMO keeps the exact
+  position, lateral offset included, on a lane of the route; measured: to round-off) and the
+  lane the front is on as the mapping hint;
+* back ``B``: SUMO's, computed as SUMO does from the front's lane, lane position and lateral
+  offset (:meth:`RouteBody.bodies`).
+
+On a straight lane the body is exactly the rectangle of ``L x W`` centred on ``p`` along the lane.
+Elsewhere it differs; :meth:`RouteBody.pads` bounds, per waypoint, how far SUMO's body reaches
+beyond that rectangle in the waypoint's segment frame for every plant position the waypoint's
+claims can hold, and the reach claims add it to the footprint (tm.reach).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["RouteBody", "SAMPLE_M", "AHEAD_M"]
+
+#: Arc spacing of the positions :meth:`RouteBody.pads` evaluates (m); the change of the body
+#: between neighbouring samples is added to the pads, so a coarser grid only costs room.
+SAMPLE_M = 0.1
+#: How far past its waypoint (beyond ``T^0``'s along extent) a vehicle's position may be for the
+#: pads of that waypoint to hold (m).  The waypoint is its stop point; the loop counts the
+#: vehicle-steps beyond it (``body_window_exits``, a safety counter).
+AHEAD_M = 1.0
+
+
+def _arc(points: np.ndarray) -> np.ndarray:
+    return np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(points, axis=0).T))])
+
+
+def _at(points, arc, s):
+    """Points (n, 2), unit tangents (n, 2) and segment indices at arc positions ``s`` (clipped)."""
+    s = np.clip(np.asarray(s, dtype=float), 0.0, arc[-1])
+    i = np.clip(np.searchsorted(arc, s, side="right") - 1, 0, len(points) - 2)
+    d = points[i + 1] - points[i]
+    n = np.hypot(d[:, 0], d[:, 1])
+    t = d / np.where(n > 0, n, 1.0)[:, None]
+    return points[i] + t * (s - arc[i])[:, None], t, i
+
+
+def _project(points, arc, p, lo=0.0, hi=np.inf):
+    """Arc positions and signed offsets (left +) of points ``p`` (n, 2) on a polyline, each
+    restricted to segments overlapping ``[lo, hi]`` (scalars or (n,))."""
+    p = np.asarray(p, dtype=float).reshape(-1, 2)
+    a, b = points[:-1], points[1:]
+    d = b - a
+    ln2 = np.maximum((d ** 2).sum(axis=1), 1e-18)
+    w = p[:, None, :] - a[None]
+    u = np.clip((w * d[None]).sum(axis=2) / ln2[None], 0.0, 1.0)
+    q = a[None] + u[..., None] * d[None]
+    dist = np.hypot(p[:, None, 0] - q[..., 0], p[:, None, 1] - q[..., 1])
+    lo = np.broadcast_to(np.asarray(lo, dtype=float), (len(p),))
+    hi = np.broadcast_to(np.asarray(hi, dtype=float), (len(p),))
+    ok = (arc[1:][None] >= lo[:, None]) & (arc[:-1][None] <= hi[:, None])
+    dist = np.where(ok | ~ok.any(axis=1, keepdims=True), dist, np.inf)
+    j = np.argmin(dist, axis=1)
+    r = np.arange(len(p))
+    sigma = arc[j] + u[r, j] * np.sqrt(ln2[j])
+    t = d[j] / np.sqrt(ln2[j])[:, None]
+    e = t[:, 0] * (p[:, 1] - q[r, j, 1]) - t[:, 1] * (p[:, 0] - q[r, j, 0])
+    return sigma, e
+
+
+class RouteBody:
+    """SUMO's body along one route (see the module notes).
+
+    Parameters
+    ----------
+    route : bridge.waypoints.RouteWaypoints
+        The route's polyline and the lane of each of its segments.
+    net : bridge.waypoints.NetGeometry
+        For the lanes' shapes (SUMO's geometry).
+    length, width : float
+        SUMO's vType length and width (m).
+    """
+
+    def __init__(self, route, net, length: float, width: float) -> None:
+        self.length, self.width = float(length), float(width)
+        self.poly = np.asarray(route.polyline, dtype=float)
+        self.parc = _arc(self.poly)
+        # the route's lanes in order, each once; a polyline segment's lane is one of them
+        order: list[str] = []
+        for lane in route.segment_lanes:
+            if not order or order[-1] != lane:
+                order.append(lane)
+        self.lanes = order
+        self.seg_lane = np.array([0] * len(route.segment_lanes), dtype=np.intp)
+        k = 0
+        for s, lane in enumerate(route.segment_lanes):
+            while order[k] != lane:
+                k += 1
+            self.seg_lane[s] = k
+        self.shapes = [np.asarray(net.lane_shape(lane), dtype=float) for lane in order]
+        self.arcs = [_arc(s) for s in self.shapes]
+        self.lane_len = np.array([a[-1] for a in self.arcs])
+        self.edge = [lane.rsplit("_", 1)[0] for lane in order]
+        self.index = [int(lane.rsplit("_", 1)[1]) for lane in order]
+        # the lane SUMO continues the back on behind lane k: the last earlier lane of another edge
+        self.behind = np.full(len(order), -1, dtype=np.intp)
+        for k in range(len(order)):
+            j = k - 1
+            while j >= 0 and self.edge[j] == self.edge[k]:
+                j -= 1
+            self.behind[k] = j
+
+    @property
+    def route_length(self) -> float:
+        return float(self.parc[-1])
+
+    def project(self, p, around=None, back: float = 5.0, ahead: float = 30.0):
+        """Arc positions and signed offsets (left +) of positions ``p`` (n, 2) on the route,
+        searched within ``[around - back, around + ahead]`` when ``around`` (n,) is given."""
+        if around is None:
+            return _project(self.poly, self.parc, p)
+        around = np.asarray(around, dtype=float)
+        return _project(self.poly, self.parc, p, around - back, around + ahead)
+
+    def bodies(self, sigma, e):
+        """SUMO's body for reference points at arc ``sigma`` (n,) and offset ``e`` (n,).
+
+        Returns
+        -------
+        front, back : ndarray, shape (n, 2)
+        lane : ndarray of int, shape (n,)
+            Index into :attr:`lanes` of the lane the front is on.
+        corners : ndarray, shape (n, 4, 2)
+            The box of width ``W`` around ``back -> front``, counter-clockwise from the front
+            right corner (as :func:`tm.geometry.rectangles`).
+        """
+        sigma = np.asarray(sigma, dtype=float).reshape(-1)
+        e = np.broadcast_to(np.asarray(e, dtype=float), sigma.shape)
+        L, half = self.length, 0.5 * self.length
+        q, t, seg = _at(self.poly, self.parc, sigma + half)
+        front = q + e[:, None] * np.column_stack([-t[:, 1], t[:, 0]])
+        lane = self.seg_lane[seg]
+        back = np.empty_like(front)
+        for k in np.unique(lane):
+            rows = np.flatnonzero(lane == k)
+            s, lat = _project(self.shapes[k], self.arcs[k], front[rows])
+            rem = s - L  # lane position of the back on lane k (negative: on the lanes behind)
+            cur = np.full(len(rows), k)
+            for _ in range(8):
+                short = rem < 0
+                prev = self.behind[cur]
+                go = short & (prev >= 0)
+                if not go.any():
+                    break
+                cur = np.where(go, prev, cur)
+                rem = np.where(go, rem + self.lane_len[cur], rem)
+            for c in np.unique(cur):
+                sel = cur == c
+                pt, tt, _ = _at(self.shapes[c], self.arcs[c], rem[sel])
+                back[rows[sel]] = pt + lat[sel, None] * np.column_stack([-tt[:, 1], tt[:, 0]])
+        axis = front - back
+        n = np.hypot(axis[:, 0], axis[:, 1])
+        u = axis / np.where(n > 0, n, 1.0)[:, None]
+        side = 0.5 * self.width * np.column_stack([-u[:, 1], u[:, 0]])
+        corners = np.stack([front - side, front + side, back + side, back - side], axis=1)  # CCW, as tm.geometry
+        return front, back, lane, corners
+
+    def pads(self, arc_k, W, H, box_lo, box_hi) -> np.ndarray:
+        """Per waypoint, how far SUMO's body reaches beyond the rectangle ``L x W`` centred on the
+        plant position in the waypoint's segment frame: ``(K, 2)`` (along, across) >= 0.
+
+        The positions taken are every reference point ``path(sigma) + e n`` (``sigma`` on a
+        :data:`SAMPLE_M` grid, ``e`` in ``{-e_max, 0, e_max}`` with ``e_max`` the across extent of
+        the box) whose place in waypoint ``k``'s frame lies in ``[box_lo, box_hi]`` widened by
+        ``e_max``; a position between two samples is covered by adding the largest change of the
+        body between them.
+
+        Parameters
+        ----------
+        arc_k : ndarray, shape (K,)
+            Arc positions of the waypoints on the route polyline.
+        W, H : ndarray, shapes (K, 2) and (K,)
+            The waypoints and their segment headings.
+        box_lo, box_hi : (2,) float
+            Along and across bounds, in a waypoint's frame, of every position a vehicle can hold
+            while that waypoint is its current one (its sets' widest projection; the along upper
+            bound already includes :data:`AHEAD_M`).
+        """
+        W = np.asarray(W, dtype=float)
+        H = np.asarray(H, dtype=float)
+        arc_k = np.asarray(arc_k, dtype=float)
+        e_max = float(max(abs(box_lo[1]), abs(box_hi[1])))
+        n = int(np.ceil(self.route_length / SAMPLE_M)) + 1
+        sig = np.linspace(0.0, self.route_length, n)
+        q, t, _ = _at(self.poly, self.parc, sig)
+        nrm = np.column_stack([-t[:, 1], t[:, 0]])
+        rel, ref = [], []
+        for ev in (-e_max, 0.0, e_max):
+            _, _, _, cs = self.bodies(sig, np.full(n, ev))
+            p = q + ev * nrm
+            rel.append(cs - p[:, None, :])
+            ref.append(p)
+        rel = np.stack(rel, axis=1)  # (n, 3, 4, 2)
+        ref = np.stack(ref, axis=1)  # (n, 3, 2)
+        # body change between neighbouring samples: the room a position between two samples needs
+        step = np.zeros(n)
+        if n > 1:
+            dr = np.diff(rel, axis=0)
+            dd = np.hypot(dr[..., 0], dr[..., 1]).max(axis=(1, 2))
+            step[:-1] = np.maximum(step[:-1], dd)
+            step[1:] = np.maximum(step[1:], dd)
+        reach = float(max(-box_lo[0], box_hi[0]))
+        out = np.zeros((len(W), 2))
+        for k in range(len(W)):
+            win = np.flatnonzero((sig >= arc_k[k] - 2.0 * reach - 2.0 * self.length) &
+                                 (sig <= arc_k[k] + reach + 2.0 * self.length))
+            if not len(win):
+                continue
+            c, s = np.cos(H[k]), np.sin(H[k])
+            d = ref[win] - W[k]
+            a = c * d[..., 0] + s * d[..., 1]
+            y = -s * d[..., 0] + c * d[..., 1]
+            inside = ((a >= box_lo[0] - e_max) & (a <= box_hi[0] + e_max) &
+                      (y >= box_lo[1] - e_max) & (y <= box_hi[1] + e_max)).any(axis=1)
+            if not inside.any():
+                continue
+            r = rel[win[inside]]
+            ra = np.abs(c * r[..., 0] + s * r[..., 1]).max(axis=(1, 2))
+            ry = np.abs(-s * r[..., 0] + c * r[..., 1]).max(axis=(1, 2))
+            st = step[win[inside]]
+            out[k, 0] = max(0.0, float((ra + st).max()) - 0.5 * self.length)
+            out[k, 1] = max(0.0, float((ry + st).max()) - 0.5 * self.width)
+        return out
