@@ -238,9 +238,7 @@ class Cosim:
         self._link_state: np.ndarray | None = None
         # SUMO's own bodies (bridge.sumo_body): per waypoint the claims' footprint padding
         self._pads: dict[str, np.ndarray | None] = {}
-        #: Vehicle-steps (authority mode) with a position past the stretch of its waypoint's frame
-        #: the padding was computed for (``bridge.sumo_body.AHEAD_M`` beyond ``T^0``).
-        self.body_window_exits = 0
+        self._window_exits = 0  # vehicle-steps past the padding's stretch (see body_window_exits)
 
     # -------------------------------------------------------------- state
     def _fleet(self, with_requests: bool):
@@ -361,6 +359,13 @@ class Cosim:
         self.signal_book.count_crossings(cur.ids, front, row, s_line, self._link_state[slot])
 
     @property
+    def body_window_exits(self) -> int:
+        """Vehicle-steps (authority mode) with a position outside the stretch the claims' body padding
+        was computed for: past its waypoint by more than ``bridge.sumo_body.AHEAD_M`` beyond ``T^0``
+        (counted here), or rolled back more than ``BACK_M`` (counted by the world)."""
+        return self._window_exits + int(getattr(self.world, "body_window_exits", 0))
+
+    @property
     def red_violations(self) -> int:
         """Stop lines crossed (front bumper) while their link was red, over the run."""
         return self.signal_book.red_violations
@@ -398,22 +403,30 @@ class Cosim:
         return replace(state, requesting=req)
 
     def _spec_pads(self, sp: VehicleSpec) -> np.ndarray:
-        """The claims' footprint padding (K, 2) at every waypoint of ``sp``: how far the world's
-        own body reaches beyond the rectangle (``world.body_pads``, SUMO: :mod:`bridge.sumo_body`)
-        for every position the class's sets hold in a waypoint's frame (``T^N``'s projection, cut
-        :data:`~bridge.sumo_body.AHEAD_M` past ``T^0``); zeros without one or in paper mode."""
+        """The claims' footprint padding (2,) of ``sp`` at rest on its first waypoint, preparing the
+        world's padding of its route (``world.register_pads``, SUMO: :mod:`bridge.sumo_body`): how
+        far the world's own body reaches beyond the rectangle, for the positions the class's sets
+        hold in a waypoint's frame (``T^N``'s projection, cut :data:`~bridge.sumo_body.AHEAD_M`
+        past ``T^0``); zeros without one or in paper mode."""
         pads = self._pads.get(sp.id)
         if pads is None:
-            fn = getattr(self.world, "body_pads", None)
+            fn = getattr(self.world, "register_pads", None)
             if self.authority and fn is not None:
                 T = self.reach.models[sp.vclass].tables
                 lo = (float(T.p_lo[T.N]), float(T.y_lo[T.N]))
                 hi = (self._ahead(sp.vclass), float(T.y_hi[T.N]))
                 pads = fn(sp, lo, hi)
             if pads is None:
-                pads = np.zeros((len(sp.waypoints), 2))
+                pads = np.zeros(2)
             self._pads[sp.id] = pads
         return pads
+
+    def _group_pads(self, g: _Group, offset: int = 0) -> np.ndarray:
+        """The claims' footprint padding (n, 2) of a group's vehicles for waypoints ``k + offset``
+        (``world.claim_pads``; zeros without it or in paper mode)."""
+        fn = getattr(self.world, "claim_pads", None)
+        pads = fn(g.ids, np.minimum(g.k + offset, g.K - 1)) if (self.authority and fn is not None) else None
+        return np.zeros((len(g.ids), 2)) if pads is None else pads
 
     def _ahead(self, vclass: str) -> float:
         """How far past its waypoint (along its frame) a vehicle's position may be for the padding."""
@@ -430,11 +443,11 @@ class Cosim:
                 continue
             if requests is None:
                 cen, hd, _ = g.centres()
-                parts.append((c, g.X, cen, hd, g.l, g.pads()))
+                parts.append((c, g.X, cen, hd, g.l, self._group_pads(g)))
             else:
                 r = np.asarray(requests.requesting[o:o + len(g.ids)], dtype=bool)
                 cen, hd, _ = g.centres(1)
-                parts.append((c, g.X[r], cen[r], hd[r], g.req_l[r], g.pads(1)[r]))
+                parts.append((c, g.X[r], cen[r], hd[r], g.req_l[r], self._group_pads(g, 1)[r]))
             o += len(g.ids)
         return self.reach.claims(parts)
 
@@ -446,7 +459,7 @@ class Cosim:
             if len(idx):
                 X = self.classes[c].model.equilibrium(cand.centre[idx])
                 ctl = self.groups[c].ctl
-                pads = np.array([self._spec_pads(ready[i])[0] for i in idx]).reshape(-1, 2)
+                pads = np.array([self._spec_pads(ready[i]) for i in idx]).reshape(-1, 2)
                 parts.append((c, X, cand.centre[idx], cand.heading[idx],
                               ctl.index(X, cand.centre[idx], cand.heading[idx]), pads))
                 rows.append(idx)
@@ -517,14 +530,14 @@ class Cosim:
         if self.authority and state is not None:  # 4a. x(t+1) inside S_1(t) (tube escapes counted)
             live = [g for g in self.groups.values() if g.ids]
             self.monitor.escapes(dec.claims, np.vstack([g.X[:, :2] for g in live]),
-                                 state.length, state.width, pad=np.vstack([g.pads() for g in live]))
+                                 state.length, state.width, pad=np.vstack([self._group_pads(g) for g in live]))
             for c, g in self.groups.items():  # positions past the stretch the body padding covers
                 if not g.ids:
                     continue
                 cen, hd, _ = g.centres()
                 d = g.X[:, :2] - cen
                 along = d[:, 0] * np.cos(hd) + d[:, 1] * np.sin(hd)
-                self.body_window_exits += int(np.sum(along > self._ahead(c)))
+                self._window_exits += int(np.sum(along > self._ahead(c)))
         self._count_red_crossings()  # 4b. stop lines crossed on red (front bumpers)
         self.t += 1
         t_next = self.t * s.Ts
@@ -611,7 +624,7 @@ class Cosim:
         if self.authority:  # the others' reach claims and their footprints now (condition (12))
             now = self._reach_claims() if len(cur.ids) else None
             pos = np.vstack([g.X[:, :2] for g in self.groups.values() if g.ids]) if now is not None else None
-            pads = np.vstack([g.pads() for g in self.groups.values() if g.ids]) if now is not None else None
+            pads = np.vstack([self._group_pads(g) for g in self.groups.values() if g.ids]) if now is not None else None
             now = ReachClaims.concat(now, footprint_claims(pos, cur.heading, cur.length, cur.width, pad=pads)) \
                 if now is not None else footprint_claims(np.zeros((0, 2)), [], [], [])
             ok = admit_reach(now, self._entry_claims(ready, cand), self.settings.tm.check)
@@ -634,8 +647,7 @@ class Cosim:
             W = np.asarray(sp.waypoints, dtype=float)
             x0 = g.vclass.model.equilibrium(W[0])
             H = _headings(W)
-            g.add(sp.id, W, H, x0, int(g.ctl.index(x0[None], W[:1], H[:1])[0]),
-                  pads=self._spec_pads(sp) if self.authority else None)
+            g.add(sp.id, W, H, x0, int(g.ctl.index(x0[None], W[:1], H[:1])[0]))
             self.records[sp.id].admitted_s = t_s
             if sp.stop_lines is not None:
                 reach = self.junctions.classes[sp.vclass].hold + 0.5 * g.vclass.length

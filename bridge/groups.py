@@ -25,7 +25,7 @@ class _Group:
         self.H: list[np.ndarray] = []
         # every route's waypoints and headings in one buffer, so that the current (or next)
         # waypoints of all vehicles are one gather: row start[i] + k[i] of vehicle i
-        self._wbuf = np.zeros((1024, 5))  # x, y, heading, body pad along, across
+        self._wbuf = np.zeros((1024, 3))
         self._used = 0
         self.start = np.zeros(0, dtype=np.intp)
         self.K = np.zeros(0, dtype=np.intp)
@@ -35,25 +35,22 @@ class _Group:
         self.denied_last = np.zeros(0, dtype=bool)
         self.req_l = np.zeros(0, dtype=np.intp)  # request indices of the last TM state
 
-    def add(self, vid, W, H, x0, l0, pads=None):
-        """Add a vehicle: waypoints ``W`` (K, 2), headings ``H`` (K,), state ``x0``, index ``l0``;
-        ``pads`` (K, 2): the claims' footprint padding per waypoint (default 0)."""
+    def add(self, vid, W, H, x0, l0):
         K = len(W)
         live = int(self.K.sum())
         if self._used + K > len(self._wbuf):
             if self._used > 2 * live + 4096:  # mostly removed routes: compact
                 rows = np.concatenate([np.arange(s, s + k) for s, k in zip(self.start, self.K)]) \
                     if len(self.K) else np.zeros(0, dtype=np.intp)
-                self._wbuf = np.vstack([self._wbuf[rows], np.zeros((max(1024, 2 * (live + K)), 5))])
+                self._wbuf = np.vstack([self._wbuf[rows], np.zeros((max(1024, 2 * (live + K)), 3))])
                 self.start = np.concatenate([[0], np.cumsum(self.K)[:-1]]).astype(np.intp) \
                     if len(self.K) else self.start
                 self._used = live
             if self._used + K > len(self._wbuf):
                 grow = max(len(self._wbuf), K)
-                self._wbuf = np.vstack([self._wbuf, np.zeros((grow, 5))])
+                self._wbuf = np.vstack([self._wbuf, np.zeros((grow, 3))])
         self._wbuf[self._used:self._used + K, :2] = W
         self._wbuf[self._used:self._used + K, 2] = H
-        self._wbuf[self._used:self._used + K, 3:] = 0.0 if pads is None else pads
         self.ids.append(vid)
         self.X = np.vstack([self.X, x0[None]])
         self.k = np.append(self.k, 0)
@@ -89,12 +86,6 @@ class _Group:
             return np.zeros((0, 2)), np.zeros(0), np.zeros(0, dtype=bool)
         row = self._wbuf[self.start + np.minimum(self.k + offset, self.K - 1)]
         return row[:, :2], row[:, 2], self.k + offset < self.K
-
-    def pads(self, offset=0) -> np.ndarray:
-        """The claims' footprint padding (n, 2) at waypoints ``k + offset`` (clipped to the last)."""
-        if not self.ids:
-            return np.zeros((0, 2))
-        return self._wbuf[self.start + np.minimum(self.k + offset, self.K - 1), 3:5]
 
 
 def _headings(W: np.ndarray) -> np.ndarray:

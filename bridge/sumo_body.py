@@ -24,16 +24,16 @@ What this module does instead, for a plant position ``p`` (the body's reference 
   offset (:meth:`RouteBody.bodies`).
 
 On a straight lane the body is exactly the rectangle of ``L x W`` centred on ``p`` along the lane.
-Elsewhere it differs; :meth:`RouteBody.pads` bounds, per waypoint, how far SUMO's body reaches
-beyond that rectangle in the waypoint's segment frame for every plant position the waypoint's
-claims can hold, and the reach claims add it to the footprint (tm.reach).
+Elsewhere it differs; :class:`PadTable` bounds how far SUMO's body reaches beyond that rectangle
+in the current waypoint's segment frame, for every position the vehicle can still hold (between
+where it is and its waypoint), and the reach claims add it to the footprint (tm.reach).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["RouteBody", "SAMPLE_M", "AHEAD_M"]
+__all__ = ["RouteBody", "PadTable", "SAMPLE_M", "AHEAD_M", "BACK_M"]
 
 #: Arc spacing of the positions :meth:`RouteBody.pads` evaluates (m); the change of the body
 #: between neighbouring samples is added to the pads, so a coarser grid only costs room.
@@ -42,6 +42,9 @@ SAMPLE_M = 0.1
 #: pads of that waypoint to hold (m).  The waypoint is its stop point; the loop counts the
 #: vehicle-steps beyond it (``body_window_exits``, a safety counter).
 AHEAD_M = 1.0
+#: How far a vehicle's reference point may roll back along its route (below the furthest it
+#: reached) for the padding to hold (m); counted otherwise (``body_window_exits``).
+BACK_M = 0.5
 
 
 def _arc(points: np.ndarray) -> np.ndarray:
@@ -178,69 +181,89 @@ class RouteBody:
         corners = np.stack([front - side, front + side, back + side, back - side], axis=1)  # CCW, as tm.geometry
         return front, back, lane, corners
 
-    def pads(self, arc_k, W, H, box_lo, box_hi) -> np.ndarray:
-        """Per waypoint, how far SUMO's body reaches beyond the rectangle ``L x W`` centred on the
-        plant position in the waypoint's segment frame: ``(K, 2)`` (along, across) >= 0.
+    def pad_table(self, arc_k, W, H, box_lo, box_hi) -> "PadTable":
+        """The :class:`PadTable` of this route for waypoints ``W`` (arcs ``arc_k``, headings ``H``)."""
+        return PadTable(self, arc_k, W, H, box_lo, box_hi)
 
-        The positions taken are every reference point ``path(sigma) + e n`` (``sigma`` on a
-        :data:`SAMPLE_M` grid, ``e`` in ``{-e_max, 0, e_max}`` with ``e_max`` the across extent of
-        the box) whose place in waypoint ``k``'s frame lies in ``[box_lo, box_hi]`` widened by
-        ``e_max``; a position between two samples is covered by adding the largest change of the
-        body between them.
 
-        Parameters
-        ----------
-        arc_k : ndarray, shape (K,)
-            Arc positions of the waypoints on the route polyline.
-        W, H : ndarray, shapes (K, 2) and (K,)
-            The waypoints and their segment headings.
-        box_lo, box_hi : (2,) float
-            Along and across bounds, in a waypoint's frame, of every position a vehicle can hold
-            while that waypoint is its current one (its sets' widest projection; the along upper
-            bound already includes :data:`AHEAD_M`).
-        """
-        W = np.asarray(W, dtype=float)
-        H = np.asarray(H, dtype=float)
-        arc_k = np.asarray(arc_k, dtype=float)
-        e_max = float(max(abs(box_lo[1]), abs(box_hi[1])))
-        n = int(np.ceil(self.route_length / SAMPLE_M)) + 1
-        sig = np.linspace(0.0, self.route_length, n)
-        q, t, _ = _at(self.poly, self.parc, sig)
+class PadTable:
+    """How far SUMO's body reaches beyond the rectangle ``L x W`` centred on the plant position,
+    in a waypoint's segment frame, for the positions a vehicle can hold (:meth:`pads`).
+
+    The positions taken are the reference points ``path(sigma) + e n`` with ``sigma`` on a
+    :data:`SAMPLE_M` grid and ``e`` in ``{-e_max, 0, e_max}`` (``e_max``: the across extent of the
+    box) that lie in ``[box_lo, box_hi]`` of the waypoint's frame and at ``sigma`` no lower than
+    the vehicle's window start (it does not roll back more than :data:`BACK_M`).  A position
+    between two samples is covered by adding the largest change of the body between them.
+
+    Parameters
+    ----------
+    body : RouteBody
+    arc_k : ndarray, shape (K,)
+        Arc positions of the waypoints on the route polyline.
+    W, H : ndarray, shapes (K, 2) and (K,)
+        The waypoints and their segment headings.
+    box_lo, box_hi : (2,) float
+        Along and across bounds, in a waypoint's frame, of every position a vehicle can hold
+        while that waypoint is its current one (its sets' widest projection; the along upper
+        bound includes :data:`AHEAD_M`).
+    """
+
+    def __init__(self, body: RouteBody, arc_k, W, H, box_lo, box_hi) -> None:
+        self.length, self.width = body.length, body.width
+        self.arc_k = np.asarray(arc_k, dtype=float)
+        self.W = np.asarray(W, dtype=float)
+        self.H = np.asarray(H, dtype=float)
+        self.box_lo = (float(box_lo[0]), float(box_lo[1]))
+        self.box_hi = (float(box_hi[0]), float(box_hi[1]))
+        e_max = max(abs(self.box_lo[1]), abs(self.box_hi[1]))
+        n = int(np.ceil(body.route_length / SAMPLE_M)) + 1
+        self.sig = np.linspace(0.0, body.route_length, n)
+        q, t, _ = _at(body.poly, body.parc, self.sig)
         nrm = np.column_stack([-t[:, 1], t[:, 0]])
         rel, ref = [], []
         for ev in (-e_max, 0.0, e_max):
-            _, _, _, cs = self.bodies(sig, np.full(n, ev))
+            _, _, _, cs = body.bodies(self.sig, np.full(n, ev))
             p = q + ev * nrm
             rel.append(cs - p[:, None, :])
             ref.append(p)
-        rel = np.stack(rel, axis=1)  # (n, 3, 4, 2)
-        ref = np.stack(ref, axis=1)  # (n, 3, 2)
-        # body change between neighbouring samples: the room a position between two samples needs
-        step = np.zeros(n)
+        self.rel = np.stack(rel, axis=1)  # (n, 3, 4, 2)
+        self.ref = np.stack(ref, axis=1)  # (n, 3, 2)
+        self._memo: dict[tuple[int, int], np.ndarray] = {}
+        self.step = np.zeros(n)
         if n > 1:
-            dr = np.diff(rel, axis=0)
+            dr = np.diff(self.rel, axis=0)
             dd = np.hypot(dr[..., 0], dr[..., 1]).max(axis=(1, 2))
-            step[:-1] = np.maximum(step[:-1], dd)
-            step[1:] = np.maximum(step[1:], dd)
-        reach = float(max(-box_lo[0], box_hi[0]))
-        out = np.zeros((len(W), 2))
-        for k in range(len(W)):
-            win = np.flatnonzero((sig >= arc_k[k] - 2.0 * reach - 2.0 * self.length) &
-                                 (sig <= arc_k[k] + reach + 2.0 * self.length))
-            if not len(win):
-                continue
-            c, s = np.cos(H[k]), np.sin(H[k])
-            d = ref[win] - W[k]
-            a = c * d[..., 0] + s * d[..., 1]
-            y = -s * d[..., 0] + c * d[..., 1]
-            inside = ((a >= box_lo[0] - e_max) & (a <= box_hi[0] + e_max) &
-                      (y >= box_lo[1] - e_max) & (y <= box_hi[1] + e_max)).any(axis=1)
-            if not inside.any():
-                continue
-            r = rel[win[inside]]
-            ra = np.abs(c * r[..., 0] + s * r[..., 1]).max(axis=(1, 2))
-            ry = np.abs(-s * r[..., 0] + c * r[..., 1]).max(axis=(1, 2))
-            st = step[win[inside]]
-            out[k, 0] = max(0.0, float((ra + st).max()) - 0.5 * self.length)
-            out[k, 1] = max(0.0, float((ry + st).max()) - 0.5 * self.width)
-        return out
+            self.step[:-1] = np.maximum(self.step[:-1], dd)
+            self.step[1:] = np.maximum(self.step[1:], dd)
+
+    def pads(self, k: int, sigma_lo: float) -> np.ndarray:
+        """``(along, across) >= 0``: the padding of waypoint ``k``'s claims for a vehicle whose
+        reference point stays at arc ``>= sigma_lo`` (non-increasing in ``sigma_lo``)."""
+        k = int(min(max(k, 0), len(self.W) - 1))
+        j0 = int(np.searchsorted(self.sig, sigma_lo, side="left"))
+        hit = self._memo.get((k, j0))
+        if hit is None:
+            hit = self._memo[(k, j0)] = self._pads(k, j0)
+            if len(self._memo) > 4096:
+                self._memo.clear()
+        return hit
+
+    def _pads(self, k: int, j0: int) -> np.ndarray:
+        j1 = int(np.searchsorted(self.sig, self.arc_k[k] + self.box_hi[0] + 2.0 * self.length, side="right"))
+        if j1 <= j0:
+            return np.zeros(2)
+        c, s = np.cos(self.H[k]), np.sin(self.H[k])
+        d = self.ref[j0:j1] - self.W[k]
+        a = c * d[..., 0] + s * d[..., 1]
+        y = -s * d[..., 0] + c * d[..., 1]
+        inside = ((a >= self.box_lo[0]) & (a <= self.box_hi[0]) &
+                  (y >= self.box_lo[1]) & (y <= self.box_hi[1])).any(axis=1)
+        if not inside.any():
+            return np.zeros(2)
+        r = self.rel[j0:j1][inside]
+        st = self.step[j0:j1][inside]
+        ra = np.abs(c * r[..., 0] + s * r[..., 1]).max(axis=(1, 2)) + st
+        ry = np.abs(-s * r[..., 0] + c * r[..., 1]).max(axis=(1, 2)) + st
+        return np.array([max(0.0, float(ra.max()) - 0.5 * self.length),
+                         max(0.0, float(ry.max()) - 0.5 * self.width)])

@@ -37,7 +37,7 @@ from bridge.sumo_pedestrians import read_personinfo, read_persons, walk_regions
 from bridge.waypoints import RouteError, load_net, trim_start, trim_start_index
 from controllers.classes import VehicleClass, VTypeParams, builtin_classes, vtype_class
 from controllers.tolerances import HOLD_TOL_M, HOLD_TOL_RAD, POSE_TOL_M
-from bridge.sumo_body import RouteBody
+from bridge.sumo_body import BACK_M, RouteBody
 from tm.pedestrians import PedestrianRule, PedestrianSettings
 from tm.settings import TMSettings
 from tm.signals import SignalSettings
@@ -73,6 +73,12 @@ class SumoWorld:
         self._sigma: dict[str, float] = {}  # vehicle -> arc position of its reference point
         self._pose: dict[str, tuple] = {}   # vehicle -> (front, angle, edge, lane) of this step
         self._pushed: dict[str, np.ndarray] = {}  # vehicles moved by the last push -> front sent
+        self._pads: dict = {}               # vehicle -> PadTable (claims' padding)
+        self._top: dict[str, float] = {}    # vehicle -> furthest arc position reached
+        #: Vehicle-steps whose reference point rolled back more than BACK_M (padding window left).
+        self.body_window_exits = 0
+        #: Largest distance of a reference point from its route polyline so far (m).
+        self.offset_max_m = 0.0
         #: Vehicle-steps whose front SUMO put farther than POSE_TOL_M from the one pushed.
         self.pose_mismatches = 0
         self.pose_mismatch_max_m = 0.0
@@ -95,20 +101,36 @@ class SumoWorld:
             b = self._body[vid] = RouteBody(self.routes[vid], self.net, pv.length, pv.width)
         return b
 
-    def body_pads(self, spec: VehicleSpec, box_lo, box_hi) -> np.ndarray | None:
-        """Per waypoint of ``spec``, how far SUMO's body reaches beyond the footprint rectangle
-        (:meth:`bridge.sumo_body.RouteBody.pads`), for positions in ``[box_lo, box_hi]`` of each
-        waypoint's frame; None without the network's geometry."""
-        b = self.route_body(spec.id)
-        if b is None:
+    def register_pads(self, spec: VehicleSpec, box_lo, box_hi) -> np.ndarray | None:
+        """Prepare the claims' padding of ``spec`` (:class:`bridge.sumo_body.PadTable`) for positions
+        in ``[box_lo, box_hi]`` of each waypoint's frame; returns the padding (2,) of a vehicle at
+        rest on its first waypoint (None without the network's geometry)."""
+        if self.net is None:
             return None
-        W = np.asarray(spec.waypoints, dtype=float)
-        arc = np.empty(len(W))
-        s = None
-        for k in range(len(W)):  # in order: a route may pass near itself
-            arc[k] = float(b.project(W[k:k + 1], None if s is None else [s], 1.0, 10.0)[0][0])
-            s = arc[k]
-        return b.pads(arc, W, np.asarray(spec_headings(W)), box_lo, box_hi)
+        t = self._pads.get(spec.id)
+        if t is None:
+            b = self.route_body(spec.id)
+            W = np.asarray(spec.waypoints, dtype=float)
+            arc = np.empty(len(W))
+            s = None
+            for k in range(len(W)):  # in order: a route may pass near itself
+                arc[k] = float(b.project(W[k:k + 1], None if s is None else [s], 1.0, 10.0)[0][0])
+                s = arc[k]
+            t = self._pads[spec.id] = b.pad_table(arc, W, spec_headings(W), box_lo, box_hi)
+        return t.pads(0, t.arc_k[0] - BACK_M)
+
+    def claim_pads(self, ids, k) -> np.ndarray | None:
+        """The claims' padding (n, 2) of vehicles ``ids`` for their waypoints ``k`` (n,), for the
+        positions still ahead of them (from the furthest reference point reached, less
+        :data:`~bridge.sumo_body.BACK_M`); None without the network's geometry."""
+        if self.net is None:
+            return None
+        out = np.zeros((len(ids), 2))
+        for i, (v, kk) in enumerate(zip(ids, np.asarray(k).tolist())):
+            t = self._pads.get(v)
+            if t is not None:
+                out[i] = t.pads(kk, self._top.get(v, t.arc_k[0]) - BACK_M)
+        return out
 
     def _poses(self, ids, centre):
         """SUMO's bodies for reference points ``centre`` (see :mod:`bridge.sumo_body`); caches the
@@ -119,7 +141,13 @@ class SumoWorld:
             s0 = self._sigma.get(v)
             sig, e = b.project(centre[i:i + 1], None if s0 is None else [s0])
             front, back, lane, corners = b.bodies(sig, e)
-            self._sigma[v] = float(sig[0])
+            sg = float(sig[0])
+            self._sigma[v] = sg
+            self.offset_max_m = max(self.offset_max_m, abs(float(e[0])))
+            top = self._top.get(v, sg)
+            if sg < top - BACK_M:  # rolled back past the padding's window
+                self.body_window_exits += 1
+            self._top[v] = max(top, sg)
             ax = front[0] - back[0]
             ang = float(sumo_angle(np.arctan2(ax[1], ax[0])))
             k = int(lane[0])
@@ -195,6 +223,8 @@ class SumoWorld:
         self._held.discard(vid)
         self._sigma.pop(vid, None)
         self._body.pop(vid, None)
+        self._pads.pop(vid, None)
+        self._top.pop(vid, None)
         self.adapter.finish(vid)
 
     def check_poses(self) -> int:
@@ -494,6 +524,7 @@ def run_sumo(target: str, out: Path, opts) -> dict:
                 collisions_sumo=len(sim.collisions_world),
                 pose_mismatches=world.pose_mismatches if world is not None else 0,
                 pose_mismatch_max_m=round(world.pose_mismatch_max_m, 6) if world is not None else 0.0,
+                route_offset_max_m=round(world.offset_max_m, 4) if world is not None else 0.0,
                 red_violations=sim.red_violations, signal_withheld=sim.signal_book.withheld,
                 pedestrian_conflicts=len(sim.pedestrian_conflicts),
                 pedestrian_withheld=sim.pedestrian_withheld,
