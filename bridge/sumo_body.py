@@ -65,6 +65,11 @@ def _project(points, arc, p, lo=0.0, hi=np.inf):
     """Arc positions and signed offsets (left +) of points ``p`` (n, 2) on a polyline, each
     restricted to segments overlapping ``[lo, hi]`` (scalars or (n,))."""
     p = np.asarray(p, dtype=float).reshape(-1, 2)
+    if np.ndim(lo) == 0 and np.ndim(hi) == 0 and np.isfinite(hi):  # one window: only its segments
+        i0 = max(int(np.searchsorted(arc, lo, side="right")) - 1, 0)
+        i1 = min(int(np.searchsorted(arc, hi, side="left")) + 1, len(points))
+        if i1 - i0 >= 2:
+            return _project(points[i0:i1], arc[i0:i1], p)
     a, b = points[:-1], points[1:]
     d = b - a
     ln2 = np.maximum((d ** 2).sum(axis=1), 1e-18)
@@ -136,6 +141,9 @@ class RouteBody:
         if around is None:
             return _project(self.poly, self.parc, p)
         around = np.asarray(around, dtype=float)
+        if around.size == 1:
+            a = float(around.reshape(-1)[0])
+            return _project(self.poly, self.parc, p, a - back, a + ahead)
         return _project(self.poly, self.parc, p, around - back, around + ahead)
 
     def bodies(self, sigma, e):
