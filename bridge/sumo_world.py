@@ -75,7 +75,8 @@ class SumoWorld:
         self._pushed: dict[str, np.ndarray] = {}  # vehicles moved by the last push -> front sent
         self._pads: dict = {}               # vehicle -> PadTable (claims' padding)
         self._top: dict[str, float] = {}    # vehicle -> furthest arc position reached
-        #: Vehicle-steps whose reference point rolled back more than BACK_M (padding window left).
+        #: Vehicle-steps whose reference point rolled back more than BACK_M or lay farther than
+        #: OFFSET_MAX_M from its route (outside what the claims' padding covers).
         self.body_window_exits = 0
         #: Largest distance of a reference point from its route polyline so far (m).
         self.offset_max_m = 0.0
@@ -144,6 +145,9 @@ class SumoWorld:
             sg = float(sig[0])
             self._sigma[v] = sg
             self.offset_max_m = max(self.offset_max_m, abs(float(e[0])))
+            t = self._pads.get(v)
+            if t is not None and abs(float(e[0])) > t.offset_max + 1e-9:  # off the padding's offsets
+                self.body_window_exits += 1
             top = self._top.get(v, sg)
             if sg < top - BACK_M:  # rolled back past the padding's window
                 self.body_window_exits += 1

@@ -15,7 +15,7 @@ from hypothesis import HealthCheck, given, settings, strategies as st
 from bridge.demand import PlannedVehicle
 from bridge.groups import _headings
 from bridge.sumo_adapter import SumoAdapter
-from bridge.sumo_body import BACK_M, RouteBody, _at
+from bridge.sumo_body import BACK_M, OFFSET_MAX_M, RouteBody, _at
 from bridge.sumo_world import SumoWorld
 from bridge.cosim import VehicleSpec
 from bridge.waypoints import load_net
@@ -184,13 +184,19 @@ def test_pose_mismatch_counted(world):
     assert w.pose_mismatch_max_m == pytest.approx(1.0, abs=0.05)
 
 
-def test_roll_back_counted(world):
-    """A reference point more than BACK_M behind the furthest one reached leaves the stretch the
-    padding covers: counted in ``body_window_exits``."""
+def test_roll_back_and_offset_counted(world):
+    """A reference point more than BACK_M behind the furthest one reached, or farther from its
+    route than the padding's offsets (OFFSET_MAX_M), leaves what the padding covers: counted in
+    ``body_window_exits``."""
     w, rts = world
     _insert(w, rts, "a")
+    r = rts["a"]
+    w.register_pads(VehicleSpec("a", "truck", np.asarray(r.waypoints)), (-40.0, -1.5), (1.2, 1.5))
     ba = w.route_body("a")
-    for s, exits in ((40.0, 0), (40.0 - 0.5 * BACK_M, 0), (40.0 - 2.0 * BACK_M, 1)):
-        p = _at(ba.poly, ba.parc, np.array([s]))[0]
+    assert w._pads["a"].offset_max == OFFSET_MAX_M
+    for s, off, exits in ((40.0, 0.0, 0), (40.0 - 0.5 * BACK_M, 0.0, 0), (40.0 - 2.0 * BACK_M, 0.0, 1),
+                          (41.0, 0.9 * OFFSET_MAX_M, 1), (41.5, 1.2 * OFFSET_MAX_M, 2)):
+        q, t, _ = _at(ba.poly, ba.parc, np.array([s]))
+        p = q + off * np.array([[-t[0, 1], t[0, 0]]])
         w.bodies(["a"], p, np.zeros(1), np.full(1, TRUCK[0]), np.full(1, TRUCK[1]))
-        assert w.body_window_exits == exits
+        assert w.body_window_exits == exits, (s, off)
