@@ -204,9 +204,10 @@ class PadTable:
 
     The positions taken are the reference points ``path(sigma) + e n`` with ``sigma`` on a
     :data:`SAMPLE_M` grid and ``e`` in ``{-e_max, 0, e_max}`` (``e_max``: the across extent of the
-    box, at most :data:`OFFSET_MAX_M`) that lie in ``[box_lo, box_hi]`` of the waypoint's frame and at ``sigma`` no lower than
-    the vehicle's window start (it does not roll back more than :data:`BACK_M`).  A position
-    between two samples is covered by adding the largest change of the body between them.
+    box, at most :data:`OFFSET_MAX_M`) that lie in ``[box_lo, box_hi]`` of the waypoint's frame and
+    at ``sigma`` no lower than the vehicle's window start (it does not roll back more than
+    :data:`BACK_M`).  A position between two samples is covered by adding the change of the body
+    between them, its smooth part where the body jumps.
 
     Parameters
     ----------
@@ -247,6 +248,18 @@ class PadTable:
         if n > 1:
             dr = np.diff(self.rel, axis=0)
             dd = np.hypot(dr[..., 0], dr[..., 1]).max(axis=(1, 2))
+            # where the body jumps (the front's lane changes under a lateral offset, a polyline
+            # vertex turns the offset's normal) a position between two samples has the body of one
+            # side or the other: only the smooth part of the change needs room, at most
+            # (1 + e_max kappa)(1 + W / |F - B|) per metre (corners of a box on a moving axis)
+            d = np.diff(body.poly, axis=0)
+            seg = np.hypot(d[:, 0], d[:, 1])
+            turn = np.abs(np.angle(np.exp(1j * np.diff(np.arctan2(d[:, 1], d[:, 0])))))
+            kappa = float((turn / np.maximum(np.minimum(seg[:-1], seg[1:]), SAMPLE_M)).max(initial=0.0))
+            axis = 0.5 * (self.rel[:, 1, 0] + self.rel[:, 1, 1] - self.rel[:, 1, 2] - self.rel[:, 1, 3])
+            chord = np.hypot(axis[:, 0], axis[:, 1]).min()  # shortest front-back distance (e = 0)
+            lip = (1.0 + e_max * kappa) * (1.0 + self.width / max(float(chord), 1e-6)) * SAMPLE_M
+            dd = np.minimum(dd, lip)
             self.step[:-1] = np.maximum(self.step[:-1], dd)
             self.step[1:] = np.maximum(self.step[1:], dd)
 

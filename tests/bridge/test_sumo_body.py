@@ -42,18 +42,25 @@ def _rectangle(c, h, L, W):
                      c - L / 2 * u - W / 2 * n])
 
 
-@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
-@given(st.integers(0, 10 ** 6), st.floats(0.0, 1.0), st.floats(-1.0, 1.0))
-def test_padding_covers_sumo_body(net, seed, frac, lat):
-    """For a truck on a left turn: every reference point between a lower arc and its waypoint
-    (and up to the box's lateral extent off the route) has SUMO's body inside the rectangle
-    ``L x W`` centred on it in the waypoint's frame, widened by the waypoint's padding.  Tolerance
-    1e-9 m (round-off only: the padding adds the body's change between its samples)."""
-    r = _route(net, LEFT)
-    b = RouteBody(r, net, *TRUCK)
+SIZES = [(5.0, 1.8), (12.0, 2.5), TRUCK]  # SUMO's vType sizes of car, bus, truck
+RIGHT = ("A1B1", "B1B0")  # from the west, right turn to the south
+
+
+@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(st.integers(0, 10 ** 6), st.floats(0.0, 1.0), st.floats(-1.0, 1.0), st.sampled_from([LEFT, RIGHT, STRAIGHT]),
+       st.sampled_from(SIZES))
+def test_padding_covers_sumo_body(net, seed, frac, lat, edges, size):
+    """Car, bus or truck on a left turn, a right turn or straight across: every reference point
+    between a lower arc and its waypoint (and up to OFFSET_MAX_M off the route) has SUMO's body
+    inside the rectangle ``L x W`` centred on it in the waypoint's frame, widened by the waypoint's
+    padding.  Tolerance 1e-9 m (round-off only: the padding adds the body's change between its
+    samples)."""
+    r = _route(net, edges)
+    b = RouteBody(r, net, *size)
+    size_ = size
     W, arc = r.waypoints, r.arc_length
     H = _headings(W)
-    box_lo, box_hi = (-40.0, -0.5), (1.2, 0.5)
+    box_lo, box_hi = (-40.0, -OFFSET_MAX_M), (1.2, OFFSET_MAX_M)  # lateral offsets up to the cap
     table = b.pad_table(arc, W, H, box_lo, box_hi)
     k = int(np.random.default_rng(seed).integers(1, len(W)))
     lo = max(arc[k] - 30.0, 0.0)
@@ -71,8 +78,8 @@ def test_padding_covers_sumo_body(net, seed, frac, lat):
     rel = corners[0] - p
     ra = np.abs(c * rel[:, 0] + s * rel[:, 1])
     ry = np.abs(-s * rel[:, 0] + c * rel[:, 1])
-    assert np.all(ra <= TRUCK[0] / 2 + pad[0] + 1e-9)
-    assert np.all(ry <= TRUCK[1] / 2 + pad[1] + 1e-9)
+    assert np.all(ra <= size_[0] / 2 + pad[0] + 1e-9)
+    assert np.all(ry <= size_[1] / 2 + pad[1] + 1e-9)
 
 
 def test_padding_zero_on_a_straight(net):
