@@ -28,7 +28,8 @@ What each counter checks (see ``SAFETY.md``):
     of its claim ``S_1(t)`` after the decision (reach-tightened claims).
 ``pose_mismatches``
     vehicle-steps whose front SUMO placed farther than ``POSE_TOL_M`` from the front muvsim
-    pushed (SUMO runs only): SUMO then judges a body muvsim did not plan (``bridge.sumo_body``).
+    pushed, or off every lane (SUMO runs only): SUMO then judges a body muvsim did not plan, or
+    none (``bridge.sumo_body``).
 ``body_window_exits``
     vehicle-steps (movement-authority mode) whose position lay beyond the stretch of its
     waypoint's frame for which SUMO's body padding was computed (``bridge.sumo_body.AHEAD_M``).

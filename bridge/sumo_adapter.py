@@ -643,7 +643,7 @@ class SumoAdapter:
 
     # ------------------------------------------------------------------ vehicles
     def admit(self, vehicle: PlannedVehicle, xy_front: Sequence[float], angle_deg: float, *,
-              depart_lane: int | None = None, edge: str = "", lane: int = -1) -> None:
+              depart_lane: int | None = None, hint_edge: str = "", hint_lane: int = -1) -> None:
         """Insert a vehicle now at a pose; SUMO places it there at the next :meth:`step`.
 
         Parameters
@@ -657,8 +657,8 @@ class SumoAdapter:
         depart_lane : int, optional
             Lane index on the first edge (e.g. ``RouteWaypoints.depart_lane_index``);
             default the vehicle's own, else the first lane.
-        edge, lane : str and int, optional
-            The lane the front is on, as :meth:`move`'s mapping hint.
+        hint_edge, hint_lane : str and int, optional
+            The lane the front is on (edge id, index), as :meth:`move`'s mapping hint.
         """
         api = self._need("admit")
         vid = vehicle.id
@@ -676,7 +676,11 @@ class SumoAdapter:
         x, y = (float(v) for v in xy_front)
         try:
             self.take_over(vid)
-            self._call(f"vehicle.moveToXY({vid!r})", api.vehicle.moveToXY, vid, edge, int(lane), x, y,
+            # keepRoute=1 first: SUMO refuses a pose farther than 100 m from the route (keepRoute=3
+            # alone would place it off every lane, unjudged); then the exact position
+            self._call(f"vehicle.moveToXY({vid!r})", api.vehicle.moveToXY, vid, hint_edge, int(hint_lane), x, y,
+                       float(angle_deg), 1)
+            self._call(f"vehicle.moveToXY({vid!r})", api.vehicle.moveToXY, vid, hint_edge, int(hint_lane), x, y,
                        float(angle_deg), KEEP_ROUTE)
         except SumoError as exc:  # all or nothing: SUMO must not insert it on its own terms
             try:
@@ -763,6 +767,11 @@ class SumoAdapter:
         v = self._need("positions").vehicle
         return np.array([self._call("vehicle.getPosition", v.getPosition, i) for i in ids],
                         dtype=float).reshape(-1, 2)
+
+    def lane_ids(self, ids: Sequence[str]) -> list[str]:
+        """SUMO's lane of each vehicle (``""``: placed off every lane, where SUMO judges nothing)."""
+        v = self._need("lane_ids").vehicle
+        return [self._call("vehicle.getLaneID", v.getLaneID, i) for i in ids]
 
     def pose(self, ids: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
         """SUMO's front-bumper positions (V, 2) and angles (V,) of vehicles."""

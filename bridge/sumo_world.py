@@ -175,7 +175,7 @@ class SumoWorld:
             self._sigma.pop(spec.id, None)
             self._poses([spec.id], W[:1])
             front, ang, edge, lane = self._pose.pop(spec.id)
-            self.adapter.admit(pv, front, ang, depart_lane=r.depart_lane_index, edge=edge, lane=lane)
+            self.adapter.admit(pv, front, ang, depart_lane=r.depart_lane_index, hint_edge=edge, hint_lane=lane)
             return
         h0 = float(np.arctan2(*(W[1] - W[0])[::-1]))
         self.adapter.admit(pv, front_bumper(W[0], h0, pv.length), sumo_angle(h0),
@@ -233,14 +233,16 @@ class SumoWorld:
 
     def check_poses(self) -> int:
         """Count the vehicles moved by the last push whose front SUMO has farther than
-        :data:`~controllers.tolerances.POSE_TOL_M` from the front pushed (after a step)."""
+        :data:`~controllers.tolerances.POSE_TOL_M` from the front pushed, or off every lane (with
+        ``keepRoute=3`` a front off the road stays there, and SUMO checks no collision for it)."""
         if not self._pushed:
             return 0
         ids = list(self._pushed)
         got = self.adapter.positions(ids)
         want = np.array([self._pushed[v] for v in ids]).reshape(-1, 2)
         d = np.hypot(*(got - want).T)
-        n = int(np.sum(d > POSE_TOL_M))
+        off = np.array([lane == "" for lane in self.adapter.lane_ids(ids)])  # off every lane: unjudged
+        n = int(np.sum((d > POSE_TOL_M) | off))
         self.pose_mismatches += n
         self.pose_mismatch_max_m = max(self.pose_mismatch_max_m, float(d.max(initial=0.0)))
         return n

@@ -207,3 +207,20 @@ def test_roll_back_and_offset_counted(world):
         p = q + off * np.array([[-t[0, 1], t[0, 0]]])
         w.bodies(["a"], p, np.zeros(1), np.full(1, TRUCK[0]), np.full(1, TRUCK[1]))
         assert w.body_window_exits == exits, (s, off)
+
+
+def test_front_off_the_network_counted(world):
+    """A front pushed off every lane (here 6 m beyond the dead end of the route's last lane):
+    with keepRoute=3 SUMO keeps it there on no lane and judges no collision for it, so it counts
+    as a pose mismatch although the position is exact."""
+    w, rts = world
+    _insert(w, rts, "a")
+    w.step()
+    ba = w.route_body("a")
+    q, t, _ = _at(ba.poly, ba.parc, np.array([ba.route_length]))
+    w._pushed = {"a": q[0] + 6.0 * t[0]}
+    w.adapter.move(["a"], w._pushed["a"][None], [0.0])
+    before = w.pose_mismatches
+    w.step()
+    assert w.adapter.lane_ids(["a"]) == [""]
+    assert w.pose_mismatches == before + 1
