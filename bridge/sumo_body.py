@@ -40,8 +40,10 @@ __all__ = ["RouteBody", "PadTable", "SAMPLE_M", "AHEAD_M", "BACK_M", "OFFSET_MAX
 SAMPLE_M = 0.1
 #: How far past its waypoint (beyond ``T^0``'s along extent) a vehicle's position may be for the
 #: pads of that waypoint to hold (m).  The waypoint is its stop point; the loop counts the
-#: vehicle-steps beyond it (``body_window_exits``, a safety counter).
-AHEAD_M = 1.0
+#: vehicle-steps beyond it (``body_window_exits``, a safety counter).  At 1.0 m the last waypoint's
+#: padding took in fronts clamped at the route's dead end (0.5 m beyond the body's end of route,
+#: DEPART_CLEARANCE_M), slowing a queue on a straight road below 10 m/s; 0.3 m keeps them on it.
+AHEAD_M = 0.3
 #: Largest distance of a reference point from its route polyline for which the padding is computed
 #: (m), when the sets allow more (their across extent: 0.95 m car, 1.58 m bus, 1.74 m truck).
 #: Measured on ``grid`` (authority, 300 s): 0.74, 0.94, 0.77 m (seeds 1-3, car at most 0.95 by its

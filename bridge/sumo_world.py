@@ -75,6 +75,7 @@ class SumoWorld:
         self._pushed: dict[str, np.ndarray] = {}  # vehicles moved by the last push -> front sent
         self._pads: dict = {}               # vehicle -> PadTable (claims' padding)
         self._top: dict[str, float] = {}    # vehicle -> furthest arc position reached
+        self._sumo_arrived: set[str] = set()  # vehicles SUMO removed itself at their route's end
         #: Vehicle-steps whose reference point rolled back more than BACK_M or lay farther than
         #: OFFSET_MAX_M from its route (outside what the claims' padding covers).
         self.body_window_exits = 0
@@ -229,15 +230,20 @@ class SumoWorld:
         self._body.pop(vid, None)
         self._pads.pop(vid, None)
         self._top.pop(vid, None)
+        if vid in self._sumo_arrived:  # SUMO ended the trip itself (its front at the route's end)
+            self._sumo_arrived.discard(vid)
+            return
         self.adapter.finish(vid)
 
     def check_poses(self) -> int:
         """Count the vehicles moved by the last push whose front SUMO has farther than
         :data:`~controllers.tolerances.POSE_TOL_M` from the front pushed, or off every lane (with
         ``keepRoute=3`` a front off the road stays there, and SUMO checks no collision for it)."""
-        if not self._pushed:
+        gone = set(self.adapter.arrived_ids())  # SUMO may end a trip itself (a front at its route's end)
+        self._sumo_arrived |= gone & set(self._pushed)
+        ids = [v for v in self._pushed if v not in gone]
+        if not ids:
             return 0
-        ids = list(self._pushed)
         got = self.adapter.positions(ids)
         want = np.array([self._pushed[v] for v in ids]).reshape(-1, 2)
         d = np.hypot(*(got - want).T)
