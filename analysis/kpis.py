@@ -327,6 +327,7 @@ def run_tables(sim, tripinfo=None) -> tuple[dict, pd.DataFrame, pd.DataFrame]:
         claim_violations=int(sim.monitor.claim_violations),
         footprint_overlaps=int(sim.monitor.footprint_overlaps),
         tube_escapes=int(getattr(sim.monitor, "tube_escapes", 0)),
+        body_window_exits=int(getattr(sim, "body_window_exits", 0)),
         constraint_violations=int(sim.constraint_violations))
     from analysis.safety import verdict
 

@@ -26,6 +26,13 @@ What each counter checks (see ``SAFETY.md``):
 ``tube_escapes``
     vehicle-steps (movement-authority mode) whose position ``x(t+1)`` left the position part
     of its claim ``S_1(t)`` after the decision (reach-tightened claims).
+``pose_mismatches``
+    vehicle-steps whose front SUMO placed farther than ``POSE_TOL_M`` from the front muvsim
+    pushed, or off every lane (SUMO runs only): SUMO then judges a body muvsim did not plan, or
+    none (``bridge.sumo_body``).
+``body_window_exits``
+    vehicle-steps (movement-authority mode) whose position lay beyond the stretch of its
+    waypoint's frame for which SUMO's body padding was computed (``bridge.sumo_body.AHEAD_M``).
 """
 
 from __future__ import annotations
@@ -35,7 +42,7 @@ __all__ = ["SAFETY_COUNTERS", "UNSAFE_EXIT", "verdict"]
 #: Every safety counter a summary may hold, in the order reports list them.
 SAFETY_COUNTERS = ("collisions_sumo", "collisions_world", "collisions_geometric", "footprint_overlaps",
                    "claim_violations", "invariant_violations", "constraint_violations", "pedestrian_conflicts",
-                   "tube_escapes")
+                   "tube_escapes", "pose_mismatches", "body_window_exits")
 
 #: Exit code of ``muvsim run`` when a complete run's safety counters fired.
 UNSAFE_EXIT = 3

@@ -226,8 +226,11 @@ class Cosim:
         self.reach = ReachBook(self.families, {c: (vc.length, vc.width) for c, vc in self.classes.items()}) \
             if self.authority else None
         #: current claims reused between steps where sound (tm.reach_cache; authority mode; set None
-        #: to decide on fresh claims every step)
-        self.claim_cache = ClaimCache(self.reach) if self.authority else None
+        #: to decide on fresh claims every step).  Not with a world whose bodies pad the claims
+        #: (SUMO's, ``world.claim_pads``): the cache's own fresh claims are unpadded, so such runs
+        #: decide on the padded claims computed fresh every step.
+        self.claim_cache = ClaimCache(self.reach) \
+            if self.authority and getattr(self.world, "claim_pads", None) is None else None
         sp = settings.speed
         self.groups = {c: _Group(vc, STMPC(self.families[c], cs), decel=_look_ahead_decel(vc),
                                  slack_steps=sp.slack_steps) for c, vc in self.classes.items()}
@@ -270,6 +273,9 @@ class Cosim:
         # traffic lights (tm.signals): the vehicles' stop lines; link states read once per step
         self.signal_book = SignalBook(settings.signals)
         self._link_state: np.ndarray | None = None
+        # SUMO's own bodies (bridge.sumo_body): per waypoint the claims' footprint padding
+        self._pads: dict[str, np.ndarray | None] = {}
+        self._window_exits = 0  # vehicle-steps past the padding's stretch (see body_window_exits)
 
     def _route_speeds(self, spec: VehicleSpec):
         """The speed tables of a spec's route (built once; its record's free-flow time set)."""
@@ -416,6 +422,13 @@ class Cosim:
         self.signal_book.count_crossings(cur.ids, front, row, s_line, self._link_state[slot])
 
     @property
+    def body_window_exits(self) -> int:
+        """Vehicle-steps (authority mode) with a position outside the stretch the claims' body padding
+        was computed for: past its waypoint by more than ``bridge.sumo_body.AHEAD_M`` beyond ``T^0``
+        (counted here), or rolled back more than ``BACK_M`` (counted by the world)."""
+        return self._window_exits + int(getattr(self.world, "body_window_exits", 0))
+
+    @property
     def red_violations(self) -> int:
         """Stop lines crossed (front bumper) while their link was red, over the run."""
         return self.signal_book.red_violations
@@ -455,6 +468,38 @@ class Cosim:
             return state
         return replace(state, requesting=req)
 
+    def _spec_pads(self, sp: VehicleSpec) -> np.ndarray:
+        """The claims' footprint padding (2,) of ``sp`` at rest on its first waypoint, preparing the
+        world's padding of its route (``world.register_pads``, SUMO: :mod:`bridge.sumo_body`): how
+        far the world's own body reaches beyond the rectangle, for the positions the class's sets
+        hold in a waypoint's frame (``T^N``'s projection, cut :data:`~bridge.sumo_body.AHEAD_M`
+        past ``T^0``); zeros without one or in paper mode."""
+        pads = self._pads.get(sp.id)
+        if pads is None:
+            fn = getattr(self.world, "register_pads", None)
+            if self.authority and fn is not None:
+                T = self.reach.models[sp.vclass].tables
+                lo = (float(T.p_lo[T.N]), float(T.y_lo[T.N]))
+                hi = (self._ahead(sp.vclass), float(T.y_hi[T.N]))
+                pads = fn(sp, lo, hi)
+            if pads is None:
+                pads = np.zeros(2)
+            self._pads[sp.id] = pads
+        return pads
+
+    def _group_pads(self, g: _Group, offset: int = 0) -> np.ndarray:
+        """The claims' footprint padding (n, 2) of a group's vehicles for waypoints ``k + offset``
+        (``world.claim_pads``; zeros without it or in paper mode)."""
+        fn = getattr(self.world, "claim_pads", None)
+        pads = fn(g.ids, np.minimum(g.k + offset, g.K - 1)) if (self.authority and fn is not None) else None
+        return np.zeros((len(g.ids), 2)) if pads is None else pads
+
+    def _ahead(self, vclass: str) -> float:
+        """How far past its waypoint (along its frame) a vehicle's position may be for the padding."""
+        from bridge.sumo_body import AHEAD_M
+
+        return float(self.reach.models[vclass].tables.p_hi[0]) + AHEAD_M
+
     def _reach_claims(self, requests: FleetState | None = None) -> ReachClaims:
         """Reach claims (authority mode) of every vehicle for its current waypoint, in fleet order;
         with ``requests``: of its requesters for their requested waypoints."""
@@ -464,11 +509,11 @@ class Cosim:
                 continue
             if requests is None:
                 cen, hd, _ = g.centres()
-                parts.append((c, g.X, cen, hd, g.l))
+                parts.append((c, g.X, cen, hd, g.l, self._group_pads(g)))
             else:
                 r = np.asarray(requests.requesting[o:o + len(g.ids)], dtype=bool)
                 cen, hd, _ = g.centres(1)
-                parts.append((c, g.X[r], cen[r], hd[r], g.req_l[r]))
+                parts.append((c, g.X[r], cen[r], hd[r], g.req_l[r], self._group_pads(g, 1)[r]))
             o += len(g.ids)
         return self.reach.claims(parts)
 
@@ -523,8 +568,9 @@ class Cosim:
             if len(idx):
                 X = self.classes[c].model.equilibrium(cand.centre[idx])
                 ctl = self.groups[c].ctl
+                pads = np.array([self._spec_pads(ready[i]) for i in idx]).reshape(-1, 2)
                 parts.append((c, X, cand.centre[idx], cand.heading[idx],
-                              ctl.index(X, cand.centre[idx], cand.heading[idx])))
+                              ctl.index(X, cand.centre[idx], cand.heading[idx]), pads))
                 rows.append(idx)
         inv = np.empty(len(ready), dtype=np.intp)
         inv[np.concatenate(rows)] = np.arange(len(ready))
@@ -605,8 +651,16 @@ class Cosim:
             g.steps += 1
         ms_ctl = (time.perf_counter() - tc) * 1e3
         if self.authority and state is not None:  # 4a. x(t+1) inside S_1(t) (tube escapes counted)
-            self.monitor.escapes(dec.claims, np.vstack([g.X[:, :2] for g in self.groups.values() if g.ids]),
-                                 state.length, state.width)
+            live = [g for g in self.groups.values() if g.ids]
+            self.monitor.escapes(dec.claims, np.vstack([g.X[:, :2] for g in live]),
+                                 state.length, state.width, pad=np.vstack([self._group_pads(g) for g in live]))
+            for c, g in self.groups.items():  # positions past the stretch the body padding covers
+                if not g.ids:
+                    continue
+                cen, hd, _ = g.centres()
+                d = g.X[:, :2] - cen
+                along = d[:, 0] * np.cos(hd) + d[:, 1] * np.sin(hd)
+                self._window_exits += int(np.sum(along > self._ahead(c)))
         self._count_red_crossings()  # 4b. stop lines crossed on red (front bumpers)
         self.t += 1
         t_next = self.t * s.Ts
@@ -632,7 +686,10 @@ class Cosim:
             fresh = self._reach_claims() if self.authority else self.tm.claims(cur)
             if self.claim_cache is not None:  # the same state decides next step: its claims, as they are
                 self.claim_cache.offer(self.t, self._claim_parts(), fresh)
-            ms = self.monitor.step(cur.ids, pos, cur.heading, cur.length, cur.width, claims=fresh)
+            bodies = getattr(self.world, "bodies", None)  # the world's own bodies (SUMO's), if it has them
+            polys = bodies(cur.ids, pos, cur.heading, cur.length, cur.width) if bodies is not None else None
+            ms = self.monitor.step(cur.ids, pos, cur.heading, cur.length, cur.width, claims=fresh,
+                                   polygons=polys)
             self.world.push(list(cur.ids), pos, cur.heading)
             if np.isfinite(ms.min_separation) and ms.closest_pair:
                 for v in ms.closest_pair:
@@ -692,7 +749,8 @@ class Cosim:
         if self.authority:  # the others' reach claims and their footprints now (condition (12))
             now = self._reach_claims() if len(cur.ids) else None
             pos = np.vstack([g.X[:, :2] for g in self.groups.values() if g.ids]) if now is not None else None
-            now = ReachClaims.concat(now, footprint_claims(pos, cur.heading, cur.length, cur.width)) \
+            pads = np.vstack([self._group_pads(g) for g in self.groups.values() if g.ids]) if now is not None else None
+            now = ReachClaims.concat(now, footprint_claims(pos, cur.heading, cur.length, cur.width, pad=pads)) \
                 if now is not None else footprint_claims(np.zeros((0, 2)), [], [], [])
             entry = self._entry_claims(ready, cand, with_index=True)
             ok = admit_reach(now, entry[0], self.settings.tm.check)

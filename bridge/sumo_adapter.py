@@ -34,10 +34,10 @@ be noise.
 
 Positions.  SUMO places a vehicle by its FRONT BUMPER with an angle in
 degrees clockwise from north; see :mod:`bridge.pose` for conversions.
-Without the sublane model SUMO snaps a moved vehicle onto the centre line of
-its lane (measured: up to ~0.8 m on junction curves, the whole offset inside
-a lane change); ``lateral_resolution`` (e.g. 0.4 m) turns the sublane model
-on and SUMO then keeps the exact position, at about twice the step cost.
+:meth:`SumoAdapter.move` uses ``keepRoute=3``: SUMO keeps the exact position
+(with ``keepRoute=1`` and no sublane model it snaps the front onto the centre
+line of its lane: measured up to 1.3 m on junction curves).  SUMO's body is
+NOT a rigid rectangle at the pushed angle: see :mod:`bridge.sumo_body`.
 
 A co-simulation loop, in outline::
 
@@ -87,6 +87,10 @@ __all__ = ["SumoError", "CollisionEvent", "VehicleInfo", "SumoAdapter"]
 BACKENDS = ("libsumo", "traci")
 _REMOVE_ARRIVED = 2  # libsumo/traci constants.REMOVE_ARRIVED
 _REMOVE_VAPORIZED = 3  # libsumo/traci constants.REMOVE_VAPORIZED
+#: ``moveToXY``'s keepRoute: bit 0, map onto the vehicle's route; bit 1, keep the exact position,
+#: lateral offset included (SUMO's documented semantics; measured on 1.28: getPosition returns the
+#: pushed point to round-off).  With 1 alone SUMO puts the front on the lane's centre line.
+KEEP_ROUTE = 3
 #: SUMO's desiredMaxSpeed of bicycles (``DEFAULT_BICYCLE_SPEED``, 20 km/h): their vType's maxSpeed
 #: is 50 km/h, but SUMO drives them at most 20 km/h x speedFactor (measured: 5.89 m/s = 5.56 x 1.06
 #: alone on a 13.89 m/s road).  libsumo has no getter for desiredMaxSpeed; a vType's own one is not read.
@@ -639,7 +643,7 @@ class SumoAdapter:
 
     # ------------------------------------------------------------------ vehicles
     def admit(self, vehicle: PlannedVehicle, xy_front: Sequence[float], angle_deg: float, *,
-              depart_lane: int | None = None) -> None:
+              depart_lane: int | None = None, hint_edge: str = "", hint_lane: int = -1) -> None:
         """Insert a vehicle now at a pose; SUMO places it there at the next :meth:`step`.
 
         Parameters
@@ -653,6 +657,8 @@ class SumoAdapter:
         depart_lane : int, optional
             Lane index on the first edge (e.g. ``RouteWaypoints.depart_lane_index``);
             default the vehicle's own, else the first lane.
+        hint_edge, hint_lane : str and int, optional
+            The lane the front is on (edge id, index), as :meth:`move`'s mapping hint.
         """
         api = self._need("admit")
         vid = vehicle.id
@@ -670,7 +676,12 @@ class SumoAdapter:
         x, y = (float(v) for v in xy_front)
         try:
             self.take_over(vid)
-            self._call(f"vehicle.moveToXY({vid!r})", api.vehicle.moveToXY, vid, "", -1, x, y, float(angle_deg), 1)
+            # keepRoute=1 first: SUMO refuses a pose farther than 100 m from the route (keepRoute=3
+            # alone would place it off every lane, unjudged); then the exact position
+            self._call(f"vehicle.moveToXY({vid!r})", api.vehicle.moveToXY, vid, hint_edge, int(hint_lane), x, y,
+                       float(angle_deg), 1)
+            self._call(f"vehicle.moveToXY({vid!r})", api.vehicle.moveToXY, vid, hint_edge, int(hint_lane), x, y,
+                       float(angle_deg), KEEP_ROUTE)
         except SumoError as exc:  # all or nothing: SUMO must not insert it on its own terms
             try:
                 api.vehicle.remove(vid, 3)  # REMOVE_VAPORIZED: never departed
@@ -685,8 +696,10 @@ class SumoAdapter:
         self._call(f"vehicle.setSpeedMode({vid!r})", v.setSpeedMode, vid, 0)
         self._call(f"vehicle.setLaneChangeMode({vid!r})", v.setLaneChangeMode, vid, 0)
 
-    def move(self, ids: Sequence[str], xy_front, angle_deg) -> None:
-        """Place vehicles for the next step: ``moveToXY(v, "", -1, x, y, angle, keepRoute=1)``.
+    def move(self, ids: Sequence[str], xy_front, angle_deg, edges: Sequence[str] | None = None,
+             lanes: Sequence[int] | None = None) -> None:
+        """Place vehicles for the next step: ``moveToXY(v, edge, lane, x, y, angle, keepRoute=3)``
+        (:data:`KEEP_ROUTE`: on a lane of the vehicle's route, at the exact position).
 
         Parameters
         ----------
@@ -694,17 +707,22 @@ class SumoAdapter:
         xy_front : array (V, 2)
             Front-bumper positions (m).
         angle_deg : array (V,)
-            SUMO angles (deg).
+            SUMO angles (deg; SUMO only draws with them).
+        edges, lanes : sequences of str and int, length V, optional
+            The lane each front is on (its edge id and index): SUMO's hint where lanes overlap
+            (junctions); default none (``""``, ``-1``).
         """
         mv = self._need("move").vehicle.moveToXY
         xy = np.asarray(xy_front, dtype=float).reshape(-1, 2).tolist()
         ang = np.asarray(angle_deg, dtype=float).reshape(-1).tolist()
         if not (len(ids) == len(xy) == len(ang)):
             raise ValueError(f"move: {len(ids)} ids, {len(xy)} positions and {len(ang)} angles")
+        edges = [""] * len(ids) if edges is None else list(edges)
+        lanes = [-1] * len(ids) if lanes is None else [int(v) for v in lanes]
         vid = None
         try:
-            for vid, (x, y), a in zip(ids, xy, ang):
-                mv(vid, "", -1, x, y, a, 1)
+            for vid, (x, y), a, e, ln in zip(ids, xy, ang, edges, lanes):
+                mv(vid, e, ln, x, y, a, KEEP_ROUTE)
         except self._exc as exc:
             raise SumoError(f"SUMO failed to move vehicle {vid!r}: {exc}") from None
 
@@ -743,6 +761,17 @@ class SumoAdapter:
         v = self._need("finish").vehicle
         self._call(f"vehicle.remove({vid!r})", v.remove, vid, _REMOVE_ARRIVED)
         self._finished.append(vid)
+
+    def positions(self, ids: Sequence[str]) -> np.ndarray:
+        """SUMO's front-bumper positions (V, 2) of vehicles."""
+        v = self._need("positions").vehicle
+        return np.array([self._call("vehicle.getPosition", v.getPosition, i) for i in ids],
+                        dtype=float).reshape(-1, 2)
+
+    def lane_ids(self, ids: Sequence[str]) -> list[str]:
+        """SUMO's lane of each vehicle (``""``: placed off every lane, where SUMO judges nothing)."""
+        v = self._need("lane_ids").vehicle
+        return [self._call("vehicle.getLaneID", v.getLaneID, i) for i in ids]
 
     def pose(self, ids: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
         """SUMO's front-bumper positions (V, 2) and angles (V,) of vehicles."""

@@ -22,6 +22,7 @@ import numpy as np
 
 from controllers.speed_limits import SpeedSettings
 from bridge.cosim import Cosim, CosimSettings, VehicleSpec, Zone
+from bridge.groups import _headings as spec_headings
 from bridge.pose import front_bumper, sumo_angle
 from analysis.kpis import baseline_vehicle_table, read_tripinfo
 from analysis.halts import HaltCounter
@@ -36,7 +37,8 @@ from bridge.sumo_inputs import InputError, headless_config, parse_xml, prepare_i
 from bridge.sumo_pedestrians import read_personinfo, read_persons, walk_regions
 from bridge.waypoints import RouteError, load_net, trim_start, trim_start_index
 from controllers.classes import VehicleClass, VTypeParams, builtin_classes, vtype_class
-from controllers.tolerances import HOLD_TOL_M, HOLD_TOL_RAD
+from controllers.tolerances import HOLD_TOL_M, HOLD_TOL_RAD, POSE_TOL_M
+from bridge.sumo_body import BACK_M, RouteBody
 from tm.pedestrians import PedestrianRule, PedestrianSettings
 from tm.settings import TMSettings
 from tm.signals import SignalSettings
@@ -61,11 +63,28 @@ _NEVER = (1e18, 1e18, 0.0)  # pose of a vehicle not yet sent: far from any, so a
 class SumoWorld:
     """The :class:`~bridge.cosim.World` adapter over a started :class:`SumoAdapter`."""
 
-    def __init__(self, adapter: SumoAdapter, planned: dict, routes: dict, slots: LinkSlots | None = None):
+    def __init__(self, adapter: SumoAdapter, planned: dict, routes: dict, slots: LinkSlots | None = None,
+                 net=None):
         self.adapter = adapter
         self.slots = slots  # the signalised links the routes cross (bridge.signals)
         self.planned = planned
         self.routes = routes
+        self.net = net  # NetGeometry: SUMO's lane shapes for the bodies (bridge.sumo_body)
+        self._body: dict[str, RouteBody] = {}
+        self._sigma: dict[str, float] = {}  # vehicle -> arc position of its reference point
+        self._pose: dict[str, tuple] = {}   # vehicle -> (front, angle, edge, lane) of this step
+        self._pushed: dict[str, np.ndarray] = {}  # vehicles moved by the last push -> front sent
+        self._pads: dict = {}               # vehicle -> PadTable (claims' padding)
+        self._top: dict[str, float] = {}    # vehicle -> furthest arc position reached
+        self._sumo_arrived: set[str] = set()  # vehicles SUMO removed itself at their route's end
+        #: Vehicle-steps whose reference point rolled back more than BACK_M or lay farther than
+        #: OFFSET_MAX_M from its route (outside what the claims' padding covers).
+        self.body_window_exits = 0
+        #: Largest distance of a reference point from its route polyline so far (m).
+        self.offset_max_m = 0.0
+        #: Vehicle-steps whose front SUMO put farther than POSE_TOL_M from the one pushed.
+        self.pose_mismatches = 0
+        self.pose_mismatch_max_m = 0.0
         self.lengths: dict[str, float] = {}
         self.step_ms = 0.0
         self._sent: dict[str, list] = {}  # vehicle -> (x, y, heading) last sent by moveToXY
@@ -75,17 +94,100 @@ class SumoWorld:
         #: Fastest walking speed of any person so far (m/s; SUMO's person.getMaxSpeed).
         self.ped_speed_max = 0.0
 
+    def route_body(self, vid: str) -> RouteBody | None:
+        """SUMO's body along ``vid``'s route (None without the network's geometry)."""
+        if self.net is None:
+            return None
+        b = self._body.get(vid)
+        if b is None:
+            pv = self.planned[vid]
+            b = self._body[vid] = RouteBody(self.routes[vid], self.net, pv.length, pv.width)
+        return b
+
+    def register_pads(self, spec: VehicleSpec, box_lo, box_hi) -> np.ndarray | None:
+        """Prepare the claims' padding of ``spec`` (:class:`bridge.sumo_body.PadTable`) for positions
+        in ``[box_lo, box_hi]`` of each waypoint's frame; returns the padding (2,) of a vehicle at
+        rest on its first waypoint (None without the network's geometry)."""
+        if self.net is None:
+            return None
+        t = self._pads.get(spec.id)
+        if t is None:
+            b = self.route_body(spec.id)
+            W = np.asarray(spec.waypoints, dtype=float)
+            arc = np.empty(len(W))
+            s = None
+            for k in range(len(W)):  # in order: a route may pass near itself
+                arc[k] = float(b.project(W[k:k + 1], None if s is None else [s], 1.0, 10.0)[0][0])
+                s = arc[k]
+            t = self._pads[spec.id] = b.pad_table(arc, W, spec_headings(W), box_lo, box_hi)
+        return t.pads(0, t.arc_k[0] - BACK_M)
+
+    def claim_pads(self, ids, k) -> np.ndarray | None:
+        """The claims' padding (n, 2) of vehicles ``ids`` for their waypoints ``k`` (n,), for the
+        positions still ahead of them (from the furthest reference point reached, less
+        :data:`~bridge.sumo_body.BACK_M`); None without the network's geometry."""
+        if self.net is None:
+            return None
+        out = np.zeros((len(ids), 2))
+        for i, (v, kk) in enumerate(zip(ids, np.asarray(k).tolist())):
+            t = self._pads.get(v)
+            if t is not None:
+                out[i] = t.pads(kk, self._top.get(v, t.arc_k[0]) - BACK_M)
+        return out
+
+    def _poses(self, ids, centre):
+        """SUMO's bodies for reference points ``centre`` (see :mod:`bridge.sumo_body`); caches the
+        front, angle and lane of each for :meth:`push`."""
+        polys = np.empty((len(ids), 4, 2))
+        for i, v in enumerate(ids):
+            b = self.route_body(v)
+            s0 = self._sigma.get(v)
+            sig, e = b.project(centre[i:i + 1], None if s0 is None else [s0])
+            front, back, lane, corners = b.bodies(sig, e)
+            sg = float(sig[0])
+            self._sigma[v] = sg
+            self.offset_max_m = max(self.offset_max_m, abs(float(e[0])))
+            t = self._pads.get(v)
+            if t is not None and abs(float(e[0])) > t.offset_max + 1e-9:  # off the padding's offsets
+                self.body_window_exits += 1
+            top = self._top.get(v, sg)
+            if sg < top - BACK_M:  # rolled back past the padding's window
+                self.body_window_exits += 1
+            self._top[v] = max(top, sg)
+            ax = front[0] - back[0]
+            ang = float(sumo_angle(np.arctan2(ax[1], ax[0])))
+            k = int(lane[0])
+            self._pose[v] = (front[0], ang, b.edge[k], b.index[k])
+            polys[i] = corners[0]
+        return polys
+
+    def bodies(self, ids, centre, heading, length, width) -> np.ndarray | None:
+        """The bodies SUMO will judge after the next push of these reference points (``(V, 4, 2)``,
+        :mod:`bridge.sumo_body`); None without the network's geometry (then the monitor uses
+        rectangles)."""
+        if self.net is None:
+            return None
+        return self._poses(list(ids), np.asarray(centre, dtype=float).reshape(-1, 2))
+
     def insert(self, spec: VehicleSpec, vclass) -> None:
         pv, r = self.planned[spec.id], self.routes[spec.id]
         self.lengths[spec.id] = pv.length
         W = np.asarray(spec.waypoints, dtype=float)
+        if self.net is not None:
+            self._sigma.pop(spec.id, None)
+            self._poses([spec.id], W[:1])
+            front, ang, edge, lane = self._pose.pop(spec.id)
+            self.adapter.admit(pv, front, ang, depart_lane=r.depart_lane_index, hint_edge=edge, hint_lane=lane)
+            return
         h0 = float(np.arctan2(*(W[1] - W[0])[::-1]))
         self.adapter.admit(pv, front_bumper(W[0], h0, pv.length), sumo_angle(h0),
                            depart_lane=r.depart_lane_index)
 
     def push(self, ids, centre, heading) -> None:
         """Move the vehicles whose pose changed (beyond :data:`HOLD_TOL_M` /
-        :data:`HOLD_TOL_RAD` since it was last sent); hold the others still in SUMO."""
+        :data:`HOLD_TOL_RAD` since it was last sent); hold the others still in SUMO.  With the
+        network's geometry the front pushed is SUMO's body's (:meth:`bodies`, computed here when
+        not yet this step)."""
         c = np.asarray(centre, dtype=float).reshape(-1, 2)
         h = np.asarray(heading, dtype=float).reshape(-1)
         last = np.array([self._sent.get(v, _NEVER) for v in ids], dtype=float).reshape(-1, 3)
@@ -96,15 +198,26 @@ class SumoWorld:
             self.adapter.hold(hold)
             self._held.update(hold)
         mv = np.flatnonzero(~still)
+        self._pushed = {}
         if not len(mv):
+            self._pose = {}
             return
         mids = [ids[i] for i in mv.tolist()]
         release = [v for v in mids if v in self._held]
         if release:
             self.adapter.release(release)
             self._held.difference_update(release)
-        lengths = np.array([self.lengths[v] for v in mids])
-        self.adapter.move(mids, front_bumper(c[mv], h[mv], lengths), sumo_angle(h[mv]))
+        if self.net is not None:
+            todo = [i for i in mv.tolist() if ids[i] not in self._pose]
+            if todo:
+                self._poses([ids[i] for i in todo], c[todo])
+            poses = [self._pose[v] for v in mids]
+            fronts = np.array([p[0] for p in poses]).reshape(-1, 2)
+            self.adapter.move(mids, fronts, [p[1] for p in poses], [p[2] for p in poses], [p[3] for p in poses])
+            self._pushed = dict(zip(mids, fronts))
+        else:
+            lengths = np.array([self.lengths[v] for v in mids])
+            self.adapter.move(mids, front_bumper(c[mv], h[mv], lengths), sumo_angle(h[mv]))
         self._sent.update(zip(mids, np.column_stack([c[mv], h[mv]]).tolist()))
 
     def link_states(self) -> np.ndarray | None:
@@ -114,11 +227,38 @@ class SumoWorld:
     def finish(self, vid: str) -> None:
         self._sent.pop(vid, None)
         self._held.discard(vid)
+        self._sigma.pop(vid, None)
+        self._body.pop(vid, None)
+        self._pads.pop(vid, None)
+        self._top.pop(vid, None)
+        if vid in self._sumo_arrived:  # SUMO ended the trip itself (its front at the route's end)
+            self._sumo_arrived.discard(vid)
+            return
         self.adapter.finish(vid)
+
+    def check_poses(self) -> int:
+        """Count the vehicles moved by the last push whose front SUMO has farther than
+        :data:`~controllers.tolerances.POSE_TOL_M` from the front pushed, or off every lane (with
+        ``keepRoute=3`` a front off the road stays there, and SUMO checks no collision for it)."""
+        gone = set(self.adapter.arrived_ids())  # SUMO may end a trip itself (a front at its route's end)
+        self._sumo_arrived |= gone & set(self._pushed)
+        ids = [v for v in self._pushed if v not in gone]
+        if not ids:
+            return 0
+        got = self.adapter.positions(ids)
+        want = np.array([self._pushed[v] for v in ids]).reshape(-1, 2)
+        d = np.hypot(*(got - want).T)
+        off = np.array([lane == "" for lane in self.adapter.lane_ids(ids)])  # off every lane: unjudged
+        n = int(np.sum((d > POSE_TOL_M) | off))
+        self.pose_mismatches += n
+        self.pose_mismatch_max_m = max(self.pose_mismatch_max_m, float(d.max(initial=0.0)))
+        return n
 
     def step(self) -> list:
         t = time.perf_counter()
         self.adapter.step()
+        self._pose = {}
+        self.check_poses()
         api = self.adapter._need("persons")
         self._persons = read_persons(api)
         new = [p for p in self._persons[0] if p not in self._seen]
@@ -227,6 +367,7 @@ def run_sumo(target: str, out: Path, opts) -> dict:
     _write_summary(out, summary)
     t0 = time.perf_counter()
     sim = None
+    world = None
     undrivable: dict = {}
     observers: list = []
     adapter = SumoAdapter()
@@ -338,7 +479,8 @@ def run_sumo(target: str, out: Path, opts) -> dict:
             specs.append(VehicleSpec(id=pv.id, vclass=c, waypoints=W, depart_s=pv.depart_s - begin,
                                      speed_limits=limits, stop_lines=lines))
         summary["vehicles_undrivable"] = len(undrivable)
-        world = SumoWorld(adapter, {pv.id: pv for pv in demand.vehicles if pv.id in routes}, routes, slots=slots)
+        world = SumoWorld(adapter, {pv.id: pv for pv in demand.vehicles if pv.id in routes}, routes, slots=slots,
+                          net=geo)
         settings = CosimSettings(tm=TMSettings(policy=tm, check=check, seed=seed), switching=switching,
                                  disturbance=disturbance, solver=opts.solver, seed=seed, duration_s=duration,
                                  signals=signals, controller=getattr(opts, "controller", "paper"),
@@ -390,6 +532,9 @@ def run_sumo(target: str, out: Path, opts) -> dict:
             summary.update(figures)
             summary.update(
                 collisions_sumo=len(sim.collisions_world),
+                pose_mismatches=world.pose_mismatches if world is not None else 0,
+                pose_mismatch_max_m=round(world.pose_mismatch_max_m, 6) if world is not None else 0.0,
+                route_offset_max_m=round(world.offset_max_m, 4) if world is not None else 0.0,
                 red_violations=sim.red_violations, signal_withheld=sim.signal_book.withheld,
                 pedestrian_conflicts=len(sim.pedestrian_conflicts),
                 pedestrian_withheld=sim.pedestrian_withheld,

@@ -85,3 +85,9 @@ SPEED_BOUND_TOL = 1e-6
 #: under a constant vertex disturbance), breaking S_k(t+1) ⊆ S_{k+1}(t), which claim reuse
 #: (tm/reach_cache.py) relies on.  1e-9 m/s moves a box by < 1e-7 m (table slopes < 100 s).
 REACH_LOOKUP_MARGIN = 1e-9
+
+#: SUMO's front position after ``moveToXY(keepRoute=3)`` farther than this from the one pushed
+#: counts as a pose mismatch (``pose_mismatches``, a safety counter): SUMO then judges a body
+#: muvsim did not plan.  SUMO keeps the exact position (measured: to ~1e-14 m); 1 cm absorbs
+#: SUMO's own position validation on lane ends.
+POSE_TOL_M = 0.01

@@ -99,15 +99,16 @@ class Monitor:
         self.tube_escapes = 0
         self.min_separation = np.inf
 
-    def escapes(self, claims: ReachClaims, position, length, width) -> int:
+    def escapes(self, claims: ReachClaims, position, length, width, pad=None) -> int:
         """Count (and return) the vehicles outside the position part of their ``S_1`` (slot 1 of
-        ``claims``: the claims in force after the last decision, rows as ``position``)."""
-        n = int(tube_escapes(claims, position, length, width).sum())
+        ``claims``: the claims in force after the last decision, rows as ``position``; ``pad``:
+        the footprint padding they were built with)."""
+        n = int(tube_escapes(claims, position, length, width, pad=pad).sum())
         self.tube_escapes += n
         return n
 
     def step(self, ids: Sequence[str], position, heading, length, width,
-             claims: Claims | ReachClaims | None = None) -> MonitorStep:
+             claims: Claims | ReachClaims | None = None, polygons=None) -> MonitorStep:
         """Check one step and add it to the totals.
 
         Parameters
@@ -120,9 +121,14 @@ class Monitor:
             Claims in force, rows as ``ids`` (e.g. ``decision.claims``); not
             checked when omitted.  Reach claims are compared with ``check``
             (``timed``: slot k against slot k).
+        polygons : array_like, shape (V, k, 2), optional
+            The bodies as the world itself has them (e.g. SUMO's lane-following bodies,
+            :meth:`bridge.sumo_world.SumoWorld.bodies`); default the rectangles of ``length`` x
+            ``width`` centred on ``position`` along ``heading``.
         """
         ids = tuple(ids)
-        polys = footprint_polygons(position, heading, length, width)
+        polys = footprint_polygons(position, heading, length, width) if polygons is None \
+            else np.asarray(polygons, dtype=float)
         if len(polys) != len(ids):
             raise ValueError(f"Monitor.step: {len(ids)} ids but {len(polys)} positions")
         i, j = footprint_overlaps(polys)

@@ -15,7 +15,8 @@ as a box in the frame of ``c``'s segment (x along, y across), closed form:
   ``[v_lo_k, v_hi_k]`` the reach's velocity interval cut to ``T^m``'s;
 * across: the reach's interval cut to ``T^m``'s across range;
 * the footprint: its bounding box in the segment frame (``body_offset``: the largest angle
-  between the body and the segment, 0 on a straight).
+  between the body and the segment, 0 on a straight), plus ``body_pad``: how far the simulator's
+  own body may reach beyond it (SUMO's lane-following body, :mod:`bridge.sumo_body`).
 
 The last slot ``k = K`` holds ``T^0 ⊕ footprint`` whole: it stands for every ``k >= K``
 (``K > N >= l``, so the tube has ended in ``T^0``).  The projection of an intersection lies in
@@ -187,7 +188,7 @@ class ReachClaims:
 
 
 def reach_claims(rm: ReachModel, X: np.ndarray, centre: np.ndarray, heading: np.ndarray,
-                 index: np.ndarray, body_offset=0.0) -> ReachClaims:
+                 index: np.ndarray, body_offset=0.0, body_pad=None) -> ReachClaims:
     """Claims of vehicles of one class (vectorised over vehicles and steps).
 
     Parameters
@@ -203,6 +204,10 @@ def reach_claims(rm: ReachModel, X: np.ndarray, centre: np.ndarray, heading: np.
         Membership index of ``x`` w.r.t. ``centre`` (``<= N``).
     body_offset : float or ndarray (n,)
         Largest angle (rad) between the body and the segment over the claim.
+    body_pad : ndarray (n, 2), optional
+        How far (m, along and across the segment) the simulator's body may reach beyond the
+        footprint rectangle centred on the position (e.g. SUMO's lane-following body around turns,
+        :meth:`bridge.sumo_body.RouteBody.pads`); added to the footprint's half extents.
     """
     X = np.asarray(X, dtype=float)
     centre = np.asarray(centre, dtype=float)
@@ -226,8 +231,14 @@ def reach_claims(rm: ReachModel, X: np.ndarray, centre: np.ndarray, heading: np.
     v_hi = np.minimum(cv + ra[:, 1], T.v_hi[mm])
     off = np.broadcast_to(np.asarray(body_offset, dtype=float), (n,))
     c, s = np.abs(np.cos(off)), np.abs(np.sin(off))
-    fx = (0.5 * (rm.length * c + rm.width * s))[:, None]
-    fy = (0.5 * (rm.length * s + rm.width * c))[:, None]
+    fx = 0.5 * (rm.length * c + rm.width * s)
+    fy = 0.5 * (rm.length * s + rm.width * c)
+    if body_pad is not None:
+        pad = np.asarray(body_pad, dtype=float).reshape(n, 2)
+        if np.any(pad < 0) or not np.all(np.isfinite(pad)):
+            raise ValueError("reach_claims: body_pad must be finite and >= 0")
+        fx, fy = fx + pad[:, 0], fy + pad[:, 1]
+    fx, fy = fx[:, None], fy[:, None]
     P = np.empty((4, n, K))  # along lo, hi, across lo, hi (segment frame, footprint added below)
     # tables read just outside the velocity bounds (REACH_LOOKUP_MARGIN: ties at grid points)
     np.maximum(np.maximum(cp - ra[:, 0], T.h(mm, v_hi + REACH_LOOKUP_MARGIN)), T.p_lo[mm], out=P[0, :, :Kr])

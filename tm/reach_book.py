@@ -42,37 +42,45 @@ class ReachBook:
         """The largest number of claim slots over the classes."""
         return max(m.K for m in self.models.values())
 
-    def claims(self, parts: Sequence[tuple[str, np.ndarray, np.ndarray, np.ndarray, np.ndarray]]) -> ReachClaims:
-        """Claims of groups ``(class, X (n, 4), centre (n, 2), heading (n,), index (n,))``, concatenated
-        (shorter horizons padded with their last slot); an empty claim set when every group is empty."""
-        out = [reach_claims(self.models[c], X, C, H, np.minimum(L, self.models[c].N))
-               for c, X, C, H, L in parts if len(X)]
+    def claims(self, parts: Sequence[tuple]) -> ReachClaims:
+        """Claims of groups ``(class, X (n, 4), centre (n, 2), heading (n,), index (n,)[, pad (n, 2)])``,
+        concatenated (shorter horizons padded with their last slot); an empty claim set when every
+        group is empty.  ``pad``: the footprint's extra half extents (``reach_claims``' ``body_pad``)."""
+        out = [reach_claims(self.models[p[0]], p[1], p[2], p[3], np.minimum(p[4], self.models[p[0]].N),
+                            body_pad=p[5] if len(p) > 5 else None)
+               for p in parts if len(p[1])]
         if not out:
             K = self.K
             return ReachClaims(np.zeros((0, 2)), np.zeros(0), np.zeros((0, K, 2)), np.zeros((0, K, 2)))
         return ReachClaims.concat(*out)
 
 
-def footprint_claims(position, heading, length, width, K: int = 1) -> ReachClaims:
-    """The footprints now as claims (every slot the footprint): what a new vehicle must miss when it
-    appears, besides the others' claims from the next step on."""
+def footprint_claims(position, heading, length, width, K: int = 1, pad=None) -> ReachClaims:
+    """The footprints now as claims (every slot the footprint, widened by ``pad`` (n, 2) when given):
+    what a new vehicle must miss when it appears, besides the others' claims from the next step on."""
     position = np.asarray(position, dtype=float).reshape(-1, 2)
     half = 0.5 * np.column_stack([np.asarray(length, dtype=float), np.asarray(width, dtype=float)])
+    if pad is not None:
+        half = half + np.asarray(pad, dtype=float).reshape(-1, 2)
     lo = np.repeat(-half[:, None, :], K, axis=1)
     return ReachClaims(position, np.asarray(heading, dtype=float), lo, -lo)
 
 
-def tube_escapes(claims: ReachClaims, position, length, width, tol: float = GEOMETRY_TOL) -> np.ndarray:
+def tube_escapes(claims: ReachClaims, position, length, width, tol: float = GEOMETRY_TOL,
+                 pad=None) -> np.ndarray:
     """Which vehicles' positions ``x(t+1)`` lie outside the position part of their claim ``S_1(t)``
     (the box minus the footprint, ``tol`` given away): a tube escape, never expected.
 
     ``claims``: the claims in force after the decision of step ``t`` (the box of slot 1 was built
-    with ``body_offset = 0``: half footprint ``(length, width) / 2`` in the segment frame)."""
+    with ``body_offset = 0``: half footprint ``(length, width) / 2`` in the segment frame, plus the
+    ``body_pad`` the claims were built with, ``pad`` (n, 2))."""
     position = np.asarray(position, dtype=float).reshape(-1, 2)
     if len(position) != len(claims):
         raise ValueError(f"tube_escapes: {len(claims)} claims for {len(position)} positions")
     e = rotate_pairs(position - claims.centre, -claims.heading)
     half = 0.5 * np.column_stack([np.asarray(length, dtype=float), np.asarray(width, dtype=float)])
+    if pad is not None:
+        half = half + np.asarray(pad, dtype=float).reshape(-1, 2)
     lo, hi = claims.lo[:, 0] + half, claims.hi[:, 0] - half
     return np.any((e < lo - tol) | (e > hi + tol), axis=1)
 

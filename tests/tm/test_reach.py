@@ -204,3 +204,40 @@ def test_decide_reach_kinds_of_conflict(lcs, policy):
     assert len(pairwise_conflicts(dec.claims)[0]) == 0
     kinds = set(dec.edge_kinds.tolist())
     assert "new-fixed" in kinds
+
+
+@hsettings(max_examples=30, deadline=None)
+@given(c=st.sampled_from(URBAN), seed=st.integers(0, 2 ** 31), heading=st.floats(-np.pi, np.pi),
+       frac=st.floats(0.0, 1.0), pad=st.tuples(st.floats(0.0, 3.0), st.floats(0.0, 3.0)))
+def test_body_pad_widens_every_box_by_exactly_the_pad(lcs, c, seed, heading, frac, pad):
+    """``body_pad`` (the simulator's body beyond the footprint rectangle, bridge.sumo_body) moves
+    every non-empty box's sides out by exactly the pad (tolerance 1e-9 m, round-off), keeps empty
+    boxes empty, and :func:`tm.reach_book.tube_escapes` given the same pad still finds the position
+    part (no escape for ``x(t)`` itself in ``S_1``'s position box; an escape 0.1 m outside it)."""
+    from tm.reach_book import tube_escapes
+
+    lc = lcs[c]
+    fam = lc.ctl.family
+    rng = np.random.default_rng(seed)
+    l0 = int(round(frac * fam.N))
+    E = fam.sample(l0, 1, rng)
+    cen = rng.uniform(-100, 100, (1, 2))
+    hd = np.full(1, heading)
+    X = rotate_pairs(E, hd) + np.hstack([cen, np.zeros((1, 2))])
+    l = lc.ctl.index(X, cen, hd)
+    assume(l[0] <= fam.N)
+    base = reach_claims(lc.reach, X, cen, hd, l)
+    padded = reach_claims(lc.reach, X, cen, hd, l, body_pad=np.array([pad]))
+    ok = (base.lo <= base.hi).all(axis=-1)
+    np.testing.assert_allclose(padded.lo[ok], base.lo[ok] - np.array(pad), atol=1e-9)
+    np.testing.assert_allclose(padded.hi[ok], base.hi[ok] + np.array(pad), atol=1e-9)
+    assert np.all(padded.lo[~ok] > padded.hi[~ok])
+    L, Wd = lc.reach.length, lc.reach.width
+    mid = 0.5 * (padded.lo[0, 0] + padded.hi[0, 0])  # centre of S_1, in the segment frame
+    inside = cen + rotate_pairs(mid[None], hd)
+    assert not tube_escapes(padded, inside, [L], [Wd], pad=np.array([pad]))[0]
+    half = 0.5 * (padded.hi[0, 0] - padded.lo[0, 0]) - np.array([0.5 * L, 0.5 * Wd]) - np.array(pad)
+    out = cen + rotate_pairs((mid + np.array([half[0] + 0.1, 0.0]))[None], hd)
+    assert tube_escapes(padded, out, [L], [Wd], pad=np.array([pad]))[0]
+    with pytest.raises(ValueError, match="body_pad"):
+        reach_claims(lc.reach, X, cen, hd, l, body_pad=np.array([[-0.1, 0.0]]))

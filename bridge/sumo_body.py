@@ -1,0 +1,299 @@
+"""SUMO's body of a vehicle that muvsim moves along its route, and the pose pushed for it.
+
+SUMO does not judge collisions between rigid bodies.  A vehicle is the box of width ``W``
+around the line from its FRONT position (``vehicle.getPosition``) to its BACK position, the
+point ``length`` behind the front along SUMO's lanes (the lane it is on, then the lanes behind
+it) at the front's lateral offset (``MSVehicle::getBoundingBox`` / ``getBackPosition``; the
+passenger shapes cut the box's corners, a subset).  The angle given to ``moveToXY`` only draws.
+So on a turn SUMO's body is the chord between two points of the lane, and in muvsim's
+lane-change diagonals it stays parallel to the lane.
+
+Measured (``grid``, authority, seed 1, before this module): muvsim pushed the front bumper of a
+rigid rectangle centred on the plant state along the heading of the current waypoint's segment,
+``moveToXY`` with ``keepRoute=1`` snapped it onto the lane's centre line, and SUMO's body lay up
+to 3.7 m (a bus in a right turn) from muvsim's; a truck's front 1.31 m off the lane in a left
+turn became a junction collision muvsim's geometry never saw (min separation 0.33 m).
+
+What this module does instead, for a plant position ``p`` (the body's reference point):
+
+* ``sigma, e``: ``p``'s arc position on the route polyline and its signed offset (left +);
+* front ``F = path(sigma + L/2) + e n``: pushed with ``keepRoute=3`` (SUMO keeps the exact
+  position, lateral offset included, on a lane of the route; measured: to round-off) and the
+  lane the front is on as the mapping hint;
+* back ``B``: SUMO's, computed as SUMO does from the front's lane, lane position and lateral
+  offset (:meth:`RouteBody.bodies`).
+
+On a straight lane the body is exactly the rectangle of ``L x W`` centred on ``p`` along the lane.
+Elsewhere it differs; :class:`PadTable` bounds how far SUMO's body reaches beyond that rectangle
+in the current waypoint's segment frame, for every position the vehicle can still hold (between
+where it is and its waypoint), and the reach claims add it to the footprint (tm.reach).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["RouteBody", "PadTable", "SAMPLE_M", "AHEAD_M", "BACK_M", "OFFSET_MAX_M"]
+
+#: Arc spacing of the positions :meth:`RouteBody.pads` evaluates (m); the change of the body
+#: between neighbouring samples is added to the pads, so a coarser grid only costs room.
+SAMPLE_M = 0.1
+#: How far past its waypoint (beyond ``T^0``'s along extent) a vehicle's position may be for the
+#: pads of that waypoint to hold (m).  The waypoint is its stop point; the loop counts the
+#: vehicle-steps beyond it (``body_window_exits``, a safety counter).  At 1.0 m the last waypoint's
+#: padding took in fronts clamped at the route's dead end (0.5 m beyond the body's end of route,
+#: DEPART_CLEARANCE_M), slowing a queue on a straight road below 10 m/s; 0.3 m keeps them on it.
+AHEAD_M = 0.3
+#: Largest distance of a reference point from its route polyline for which the padding is computed
+#: (m), when the sets allow more (their across extent: 0.95 m car, 1.58 m bus, 1.74 m truck).
+#: Measured on ``grid`` (authority, 300 s): 0.74, 0.94, 0.77 m (seeds 1-3, car at most 0.95 by its
+#: sets), 1.06 m (seed 2, a bus or truck: the counter fired with a 1.0 m cap).  Counted beyond
+#: (``body_window_exits``).
+OFFSET_MAX_M = 1.5
+#: How far a vehicle's reference point may roll back along its route (below the furthest it
+#: reached) for the padding to hold (m); counted otherwise (``body_window_exits``).
+BACK_M = 0.5
+
+
+def _arc(points: np.ndarray) -> np.ndarray:
+    return np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(points, axis=0).T))])
+
+
+def _at(points, arc, s):
+    """Points (n, 2), unit tangents (n, 2) and segment indices at arc positions ``s`` (clipped)."""
+    s = np.clip(np.asarray(s, dtype=float), 0.0, arc[-1])
+    i = np.clip(np.searchsorted(arc, s, side="right") - 1, 0, len(points) - 2)
+    d = points[i + 1] - points[i]
+    n = np.hypot(d[:, 0], d[:, 1])
+    t = d / np.where(n > 0, n, 1.0)[:, None]
+    return points[i] + t * (s - arc[i])[:, None], t, i
+
+
+def _project(points, arc, p, lo=0.0, hi=np.inf):
+    """Arc positions and signed offsets (left +) of points ``p`` (n, 2) on a polyline, each
+    restricted to segments overlapping ``[lo, hi]`` (scalars or (n,))."""
+    p = np.asarray(p, dtype=float).reshape(-1, 2)
+    if np.ndim(lo) == 0 and np.ndim(hi) == 0 and np.isfinite(hi):  # one window: only its segments
+        i0 = max(int(np.searchsorted(arc, lo, side="right")) - 1, 0)
+        i1 = min(int(np.searchsorted(arc, hi, side="left")) + 1, len(points))
+        if i1 - i0 >= 2:
+            return _project(points[i0:i1], arc[i0:i1], p)
+    a, b = points[:-1], points[1:]
+    d = b - a
+    ln2 = np.maximum((d ** 2).sum(axis=1), 1e-18)
+    w = p[:, None, :] - a[None]
+    u = np.clip((w * d[None]).sum(axis=2) / ln2[None], 0.0, 1.0)
+    q = a[None] + u[..., None] * d[None]
+    dist = np.hypot(p[:, None, 0] - q[..., 0], p[:, None, 1] - q[..., 1])
+    lo = np.broadcast_to(np.asarray(lo, dtype=float), (len(p),))
+    hi = np.broadcast_to(np.asarray(hi, dtype=float), (len(p),))
+    ok = (arc[1:][None] >= lo[:, None]) & (arc[:-1][None] <= hi[:, None])
+    dist = np.where(ok | ~ok.any(axis=1, keepdims=True), dist, np.inf)
+    j = np.argmin(dist, axis=1)
+    r = np.arange(len(p))
+    sigma = arc[j] + u[r, j] * np.sqrt(ln2[j])
+    t = d[j] / np.sqrt(ln2[j])[:, None]
+    e = t[:, 0] * (p[:, 1] - q[r, j, 1]) - t[:, 1] * (p[:, 0] - q[r, j, 0])
+    return sigma, e
+
+
+class RouteBody:
+    """SUMO's body along one route (see the module notes).
+
+    Parameters
+    ----------
+    route : bridge.waypoints.RouteWaypoints
+        The route's polyline and the lane of each of its segments.
+    net : bridge.waypoints.NetGeometry
+        For the lanes' shapes (SUMO's geometry).
+    length, width : float
+        SUMO's vType length and width (m).
+    """
+
+    def __init__(self, route, net, length: float, width: float) -> None:
+        self.length, self.width = float(length), float(width)
+        self.poly = np.asarray(route.polyline, dtype=float)
+        self.parc = _arc(self.poly)
+        # the route's lanes in order, each once; a polyline segment's lane is one of them
+        order: list[str] = []
+        for lane in route.segment_lanes:
+            if not order or order[-1] != lane:
+                order.append(lane)
+        self.lanes = order
+        self.seg_lane = np.array([0] * len(route.segment_lanes), dtype=np.intp)
+        k = 0
+        for s, lane in enumerate(route.segment_lanes):
+            while order[k] != lane:
+                k += 1
+            self.seg_lane[s] = k
+        self.shapes = [np.asarray(net.lane_shape(lane), dtype=float) for lane in order]
+        self.arcs = [_arc(s) for s in self.shapes]
+        self.lane_len = np.array([a[-1] for a in self.arcs])
+        self.edge = [lane.rsplit("_", 1)[0] for lane in order]
+        self.index = [int(lane.rsplit("_", 1)[1]) for lane in order]
+        # the lane SUMO continues the back on behind lane k: the last earlier lane of another edge
+        self.behind = np.full(len(order), -1, dtype=np.intp)
+        for k in range(len(order)):
+            j = k - 1
+            while j >= 0 and self.edge[j] == self.edge[k]:
+                j -= 1
+            self.behind[k] = j
+
+    @property
+    def route_length(self) -> float:
+        return float(self.parc[-1])
+
+    def project(self, p, around=None, back: float = 5.0, ahead: float = 30.0):
+        """Arc positions and signed offsets (left +) of positions ``p`` (n, 2) on the route,
+        searched within ``[around - back, around + ahead]`` when ``around`` (n,) is given."""
+        if around is None:
+            return _project(self.poly, self.parc, p)
+        around = np.asarray(around, dtype=float)
+        if around.size == 1:
+            a = float(around.reshape(-1)[0])
+            return _project(self.poly, self.parc, p, a - back, a + ahead)
+        return _project(self.poly, self.parc, p, around - back, around + ahead)
+
+    def bodies(self, sigma, e):
+        """SUMO's body for reference points at arc ``sigma`` (n,) and offset ``e`` (n,).
+
+        Returns
+        -------
+        front, back : ndarray, shape (n, 2)
+        lane : ndarray of int, shape (n,)
+            Index into :attr:`lanes` of the lane the front is on.
+        corners : ndarray, shape (n, 4, 2)
+            The box of width ``W`` around ``back -> front``, counter-clockwise from the front
+            right corner (as :func:`tm.geometry.rectangles`).
+        """
+        sigma = np.asarray(sigma, dtype=float).reshape(-1)
+        e = np.broadcast_to(np.asarray(e, dtype=float), sigma.shape)
+        L, half = self.length, 0.5 * self.length
+        q, t, seg = _at(self.poly, self.parc, sigma + half)
+        front = q + e[:, None] * np.column_stack([-t[:, 1], t[:, 0]])
+        lane = self.seg_lane[seg]
+        back = np.empty_like(front)
+        for k in np.unique(lane):
+            rows = np.flatnonzero(lane == k)
+            s, lat = _project(self.shapes[k], self.arcs[k], front[rows])
+            rem = s - L  # lane position of the back on lane k (negative: on the lanes behind)
+            cur = np.full(len(rows), k)
+            for _ in range(8):
+                short = rem < 0
+                prev = self.behind[cur]
+                go = short & (prev >= 0)
+                if not go.any():
+                    break
+                cur = np.where(go, prev, cur)
+                rem = np.where(go, rem + self.lane_len[cur], rem)
+            for c in np.unique(cur):
+                sel = cur == c
+                pt, tt, _ = _at(self.shapes[c], self.arcs[c], rem[sel])
+                back[rows[sel]] = pt + lat[sel, None] * np.column_stack([-tt[:, 1], tt[:, 0]])
+        axis = front - back
+        n = np.hypot(axis[:, 0], axis[:, 1])
+        u = axis / np.where(n > 0, n, 1.0)[:, None]
+        side = 0.5 * self.width * np.column_stack([-u[:, 1], u[:, 0]])
+        corners = np.stack([front - side, front + side, back + side, back - side], axis=1)  # CCW, as tm.geometry
+        return front, back, lane, corners
+
+    def pad_table(self, arc_k, W, H, box_lo, box_hi) -> "PadTable":
+        """The :class:`PadTable` of this route for waypoints ``W`` (arcs ``arc_k``, headings ``H``)."""
+        return PadTable(self, arc_k, W, H, box_lo, box_hi)
+
+
+class PadTable:
+    """How far SUMO's body reaches beyond the rectangle ``L x W`` centred on the plant position,
+    in a waypoint's segment frame, for the positions a vehicle can hold (:meth:`pads`).
+
+    The positions taken are the reference points ``path(sigma) + e n`` with ``sigma`` on a
+    :data:`SAMPLE_M` grid and ``e`` in ``{-e_max, 0, e_max}`` (``e_max``: the across extent of the
+    box, at most :data:`OFFSET_MAX_M`) that lie in ``[box_lo, box_hi]`` of the waypoint's frame and
+    at ``sigma`` no lower than the vehicle's window start (it does not roll back more than
+    :data:`BACK_M`).  A position between two samples is covered by adding the change of the body
+    between them, its smooth part where the body jumps.
+
+    Parameters
+    ----------
+    body : RouteBody
+    arc_k : ndarray, shape (K,)
+        Arc positions of the waypoints on the route polyline.
+    W, H : ndarray, shapes (K, 2) and (K,)
+        The waypoints and their segment headings.
+    box_lo, box_hi : (2,) float
+        Along and across bounds, in a waypoint's frame, of every position a vehicle can hold
+        while that waypoint is its current one (its sets' widest projection; the along upper
+        bound includes :data:`AHEAD_M`).
+    """
+
+    def __init__(self, body: RouteBody, arc_k, W, H, box_lo, box_hi) -> None:
+        self.length, self.width = body.length, body.width
+        self.arc_k = np.asarray(arc_k, dtype=float)
+        self.W = np.asarray(W, dtype=float)
+        self.H = np.asarray(H, dtype=float)
+        self.box_lo = (float(box_lo[0]), float(box_lo[1]))
+        self.box_hi = (float(box_hi[0]), float(box_hi[1]))
+        e_max = min(max(abs(self.box_lo[1]), abs(self.box_hi[1])), OFFSET_MAX_M)
+        self.offset_max = e_max
+        n = int(np.ceil(body.route_length / SAMPLE_M)) + 1
+        self.sig = np.linspace(0.0, body.route_length, n)
+        q, t, _ = _at(body.poly, body.parc, self.sig)
+        nrm = np.column_stack([-t[:, 1], t[:, 0]])
+        rel, ref = [], []
+        for ev in (-e_max, 0.0, e_max):
+            _, _, _, cs = body.bodies(self.sig, np.full(n, ev))
+            p = q + ev * nrm
+            rel.append(cs - p[:, None, :])
+            ref.append(p)
+        self.rel = np.stack(rel, axis=1)  # (n, 3, 4, 2)
+        self.ref = np.stack(ref, axis=1)  # (n, 3, 2)
+        self._memo: dict[tuple[int, int], np.ndarray] = {}
+        self.step = np.zeros(n)
+        if n > 1:
+            dr = np.diff(self.rel, axis=0)
+            dd = np.hypot(dr[..., 0], dr[..., 1]).max(axis=(1, 2))
+            # where the body jumps (the front's lane changes under a lateral offset, a polyline
+            # vertex turns the offset's normal) a position between two samples has the body of one
+            # side or the other: only the smooth part of the change needs room, at most
+            # (1 + e_max kappa)(1 + W / |F - B|) per metre (corners of a box on a moving axis)
+            d = np.diff(body.poly, axis=0)
+            seg = np.hypot(d[:, 0], d[:, 1])
+            turn = np.abs(np.angle(np.exp(1j * np.diff(np.arctan2(d[:, 1], d[:, 0])))))
+            kappa = float((turn / np.maximum(np.minimum(seg[:-1], seg[1:]), SAMPLE_M)).max(initial=0.0))
+            axis = 0.5 * (self.rel[:, 1, 0] + self.rel[:, 1, 1] - self.rel[:, 1, 2] - self.rel[:, 1, 3])
+            chord = np.hypot(axis[:, 0], axis[:, 1]).min()  # shortest front-back distance (e = 0)
+            lip = (1.0 + e_max * kappa) * (1.0 + self.width / max(float(chord), 1e-6)) * SAMPLE_M
+            dd = np.minimum(dd, lip)
+            self.step[:-1] = np.maximum(self.step[:-1], dd)
+            self.step[1:] = np.maximum(self.step[1:], dd)
+
+    def pads(self, k: int, sigma_lo: float) -> np.ndarray:
+        """``(along, across) >= 0``: the padding of waypoint ``k``'s claims for a vehicle whose
+        reference point stays at arc ``>= sigma_lo`` (non-increasing in ``sigma_lo``)."""
+        k = int(min(max(k, 0), len(self.W) - 1))
+        j0 = int(np.searchsorted(self.sig, sigma_lo, side="left"))
+        hit = self._memo.get((k, j0))
+        if hit is None:
+            hit = self._memo[(k, j0)] = self._pads(k, j0)
+            if len(self._memo) > 4096:
+                self._memo.clear()
+        return hit
+
+    def _pads(self, k: int, j0: int) -> np.ndarray:
+        j1 = int(np.searchsorted(self.sig, self.arc_k[k] + self.box_hi[0] + 2.0 * self.length, side="right"))
+        if j1 <= j0:
+            return np.zeros(2)
+        c, s = np.cos(self.H[k]), np.sin(self.H[k])
+        d = self.ref[j0:j1] - self.W[k]
+        a = c * d[..., 0] + s * d[..., 1]
+        y = -s * d[..., 0] + c * d[..., 1]
+        inside = ((a >= self.box_lo[0]) & (a <= self.box_hi[0]) &
+                  (y >= self.box_lo[1]) & (y <= self.box_hi[1])).any(axis=1)
+        if not inside.any():
+            return np.zeros(2)
+        r = self.rel[j0:j1][inside]
+        st = self.step[j0:j1][inside]
+        ra = np.abs(c * r[..., 0] + s * r[..., 1]).max(axis=(1, 2)) + st
+        ry = np.abs(-s * r[..., 0] + c * r[..., 1]).max(axis=(1, 2)) + st
+        return np.array([max(0.0, float(ra.max()) - 0.5 * self.length),
+                         max(0.0, float(ry.max()) - 0.5 * self.width)])

@@ -1,0 +1,226 @@
+"""SUMO's lane-following body (bridge.sumo_body): the padding covers it, SUMO judges it, and a
+front SUMO puts elsewhere is counted.
+
+Issue 12: in authority mode on ``grid`` SUMO reported a junction collision muvsim's geometry
+never saw.  muvsim pushed the front bumper of a rigid rectangle (centre + L/2 along the current
+waypoint's heading) with ``keepRoute=1``; SUMO snapped it onto the lane's centre line (1.31 m for
+a truck in a left turn) and laid its body from that front to the point one length behind along
+its lanes.  These tests pin the replacement down against real SUMO.
+"""
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings, strategies as st
+
+from bridge.demand import PlannedVehicle
+from bridge.groups import _headings
+from bridge.sumo_adapter import SumoAdapter
+from bridge.sumo_body import BACK_M, OFFSET_MAX_M, RouteBody, _at
+from bridge.sumo_world import SumoWorld
+from bridge.cosim import VehicleSpec
+from bridge.waypoints import load_net
+from controllers.tolerances import POSE_TOL_M
+from tm.geometry import intersect_sat, polygon_distance
+
+TRUCK = (7.1, 2.4)  # SUMO's vType size of muvsim's truck (a plain box: SUMO's truck shape)
+LEFT = ("A1B1", "B1B2")      # from the west, left turn to the north at B1
+STRAIGHT = ("B2B1", "B1B0")  # southbound straight through B1: crosses the left turn
+
+
+@pytest.fixture(scope="module")
+def net(grid_net):
+    return load_net(grid_net)
+
+
+def _route(net, edges):
+    return net.route(edges, 3.0, vclass="truck", turn_max_deg=45.0)
+
+
+def _rectangle(c, h, L, W):
+    u, n = np.array([np.cos(h), np.sin(h)]), np.array([-np.sin(h), np.cos(h)])
+    return np.array([c + L / 2 * u - W / 2 * n, c + L / 2 * u + W / 2 * n, c - L / 2 * u + W / 2 * n,
+                     c - L / 2 * u - W / 2 * n])
+
+
+SIZES = [(5.0, 1.8), (12.0, 2.5), TRUCK]  # SUMO's vType sizes of car, bus, truck
+RIGHT = ("A1B1", "B1B0")  # from the west, right turn to the south
+
+
+@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(st.integers(0, 10 ** 6), st.floats(0.0, 1.0), st.floats(-1.0, 1.0), st.sampled_from([LEFT, RIGHT, STRAIGHT]),
+       st.sampled_from(SIZES))
+def test_padding_covers_sumo_body(net, seed, frac, lat, edges, size):
+    """Car, bus or truck on a left turn, a right turn or straight across: every reference point
+    between a lower arc and its waypoint (and up to OFFSET_MAX_M off the route) has SUMO's body
+    inside the rectangle ``L x W`` centred on it in the waypoint's frame, widened by the waypoint's
+    padding.  Tolerance 1e-9 m (round-off only: the padding adds the body's change between its
+    samples)."""
+    r = _route(net, edges)
+    b = RouteBody(r, net, *size)
+    size_ = size
+    W, arc = r.waypoints, r.arc_length
+    H = _headings(W)
+    box_lo, box_hi = (-40.0, -OFFSET_MAX_M), (1.2, OFFSET_MAX_M)  # lateral offsets up to the cap
+    table = b.pad_table(arc, W, H, box_lo, box_hi)
+    k = int(np.random.default_rng(seed).integers(1, len(W)))
+    lo = max(arc[k] - 30.0, 0.0)
+    sigma = lo + frac * (arc[k] + box_hi[0] - lo)
+    s_, e_ = np.array([sigma]), np.array([lat * box_hi[1]])
+    _, _, _, corners = b.bodies(s_, e_)
+    q, t, _ = _at(b.poly, b.parc, s_)
+    p = q[0] + e_[0] * np.array([-t[0, 1], t[0, 0]])
+    c, s = np.cos(H[k]), np.sin(H[k])
+    d = p - W[k]
+    a, y = c * d[0] + s * d[1], -s * d[0] + c * d[1]
+    if not (box_lo[0] <= a <= box_hi[0] and box_lo[1] <= y <= box_hi[1]):
+        return  # not a position the waypoint's claims hold
+    pad = table.pads(k, lo)
+    rel = corners[0] - p
+    ra = np.abs(c * rel[:, 0] + s * rel[:, 1])
+    ry = np.abs(-s * rel[:, 0] + c * rel[:, 1])
+    assert np.all(ra <= size_[0] / 2 + pad[0] + 1e-9)
+    assert np.all(ry <= size_[1] / 2 + pad[1] + 1e-9)
+
+
+def test_padding_zero_on_a_straight(net):
+    """On a straight lane SUMO's body is the rectangle itself: padding 0 there (the body does not
+    change between samples either)."""
+    r = _route(net, STRAIGHT)
+    b = RouteBody(r, net, *TRUCK)
+    W, arc = r.waypoints, r.arc_length
+    table = b.pad_table(arc, W, _headings(W), (-40.0, -0.5), (1.2, 0.5))
+    k = int(np.argmin(np.abs(arc - 40.0)))  # 40 m down the first straight edge, body behind on it
+    np.testing.assert_allclose(table.pads(k, arc[k] - 25.0), 0.0, atol=1e-9)
+
+
+def _planned(vid, edges):
+    return PlannedVehicle(vid, "truck", 0.0, tuple(edges), None, None, "truck", *TRUCK)
+
+
+@pytest.fixture()
+def world(grid_net, tmp_path, net):
+    routes = tmp_path / "vtypes.rou.xml"
+    routes.write_text('<routes><vType id="truck" vClass="truck" length="7.1" width="2.4"/></routes>')
+    sim = SumoAdapter()
+    sim.start(net=grid_net, routes=routes, seed=1)
+    planned = {"a": _planned("a", LEFT), "b": _planned("b", STRAIGHT)}
+    rts = {v: _route(net, p.edges) for v, p in planned.items()}
+    w = SumoWorld(sim, planned, rts, net=net)
+    yield w, rts
+    sim.close()
+
+
+def _insert(w, rts, vid):
+    r = rts[vid]
+    w.insert(VehicleSpec(vid, "truck", np.asarray(r.waypoints)), None)
+
+
+def _pair(w, rts, want_overlap):
+    """Arc positions on both routes (fronts in the junction) whose SUMO bodies overlap by more
+    than 0.15 m (``want_overlap``) or lie 0.05-0.3 m apart."""
+    ba, bb = w.route_body("a"), w.route_body("b")
+    sa = np.arange(60.0, 110.0, 0.25)
+    sb = np.arange(60.0, 110.0, 0.25)
+    _, _, lna, ca = ba.bodies(sa, np.zeros_like(sa))
+    _, _, lnb, cb = bb.bodies(sb, np.zeros_like(sb))
+    ia = np.flatnonzero([ba.lanes[k].startswith(":") for k in lna])
+    ib = np.flatnonzero([bb.lanes[k].startswith(":") for k in lnb])
+    I, J = np.meshgrid(ia, ib, indexing="ij")
+    I, J = I.ravel(), J.ravel()
+    if want_overlap:
+        shrink = lambda P: P - 0.15 * (P - P.mean(axis=1, keepdims=True)) / np.linalg.norm(  # noqa: E731
+            P - P.mean(axis=1, keepdims=True), axis=2, keepdims=True)
+        hit = intersect_sat(shrink(ca[I]), shrink(cb[J]))
+    else:
+        d = polygon_distance(ca[I], cb[J])
+        hit = (d > 0.05) & (d < 0.3)
+    t = int(np.flatnonzero(hit)[0])
+    return sa[I[t]], sb[J[t]]
+
+
+def _place(w, rts, sa, sb):
+    ba, bb = w.route_body("a"), w.route_body("b")
+    pa = _at(ba.poly, ba.parc, np.array([sa]))[0]
+    pb = _at(bb.poly, bb.parc, np.array([sb]))[0]
+    ids = ["a", "b"]
+    centre = np.vstack([pa, pb])
+    w._sigma.update(a=sa, b=sb)
+    polys = w.bodies(ids, centre, np.zeros(2), np.full(2, TRUCK[0]), np.full(2, TRUCK[1]))
+    w.push(ids, centre, np.zeros(2))
+    return polys
+
+
+@pytest.mark.parametrize("overlap", [True, False])
+def test_sumo_judges_the_body_muvsim_computes(world, overlap):
+    """Two trucks in junction B1 (one turning left, one straight across): where the bodies
+    muvsim computes overlap (by 0.15 m inside), SUMO reports a junction collision; where they are
+    0.05-0.3 m apart, SUMO reports none.  SUMO's fronts are the pushed ones (< POSE_TOL_M).
+    Before issue 12's fix muvsim's rectangles were not SUMO's bodies (1.31 m apart on a turn)."""
+    w, rts = world
+    sa, sb = _pair(w, rts, overlap)
+    _insert(w, rts, "a")
+    _insert(w, rts, "b")
+    w.step()
+    _place(w, rts, sa, sb)
+    pairs = w.step()  # SUMO judges a pose pushed before step n in step n + 1 (measured)
+    _place(w, rts, sa, sb)
+    pairs += w.step()
+    assert w.pose_mismatches == 0
+    got = w.adapter.positions(["a", "b"])
+    want = np.array([w._pushed["a"], w._pushed["b"]]) if w._pushed else got
+    assert np.all(np.hypot(*(got - want).T) < POSE_TOL_M)
+    assert (("a", "b") in [tuple(sorted(p)) for p in pairs]) == overlap
+
+
+def test_pose_mismatch_counted(world):
+    """A front SUMO holds elsewhere than pushed (here moved again behind the world's back, 1 m
+    off) is counted in ``pose_mismatches`` -- the counter that would have fired on issue 12."""
+    w, rts = world
+    _insert(w, rts, "a")
+    w.step()
+    ba = w.route_body("a")
+    p = _at(ba.poly, ba.parc, np.array([40.0]))[0]
+    w._sigma["a"] = 40.0
+    w.bodies(["a"], p, np.zeros(1), np.full(1, TRUCK[0]), np.full(1, TRUCK[1]))
+    w.push(["a"], p, np.zeros(1))
+    front = w._pushed["a"]
+    w.adapter.move(["a"], front[None] + np.array([[1.0, 0.0]]), [90.0])
+    before = w.pose_mismatches
+    w.step()
+    assert w.pose_mismatches == before + 1
+    assert w.pose_mismatch_max_m == pytest.approx(1.0, abs=0.05)
+
+
+def test_roll_back_and_offset_counted(world):
+    """A reference point more than BACK_M behind the furthest one reached, or farther from its
+    route than the padding's offsets (OFFSET_MAX_M), leaves what the padding covers: counted in
+    ``body_window_exits``."""
+    w, rts = world
+    _insert(w, rts, "a")
+    r = rts["a"]
+    w.register_pads(VehicleSpec("a", "truck", np.asarray(r.waypoints)), (-40.0, -1.5), (1.2, 1.5))
+    ba = w.route_body("a")
+    assert w._pads["a"].offset_max == OFFSET_MAX_M
+    for s, off, exits in ((40.0, 0.0, 0), (40.0 - 0.5 * BACK_M, 0.0, 0), (40.0 - 2.0 * BACK_M, 0.0, 1),
+                          (41.0, 0.9 * OFFSET_MAX_M, 1), (41.5, 1.2 * OFFSET_MAX_M, 2)):
+        q, t, _ = _at(ba.poly, ba.parc, np.array([s]))
+        p = q + off * np.array([[-t[0, 1], t[0, 0]]])
+        w.bodies(["a"], p, np.zeros(1), np.full(1, TRUCK[0]), np.full(1, TRUCK[1]))
+        assert w.body_window_exits == exits, (s, off)
+
+
+def test_front_off_the_network_counted(world):
+    """A front pushed off every lane (here 6 m beyond the dead end of the route's last lane):
+    with keepRoute=3 SUMO keeps it there on no lane and judges no collision for it, so it counts
+    as a pose mismatch although the position is exact."""
+    w, rts = world
+    _insert(w, rts, "a")
+    w.step()
+    ba = w.route_body("a")
+    q, t, _ = _at(ba.poly, ba.parc, np.array([ba.route_length]))
+    w._pushed = {"a": q[0] + 6.0 * t[0]}
+    w.adapter.move(["a"], w._pushed["a"][None], [0.0])
+    before = w.pose_mismatches
+    w.step()
+    assert w.adapter.lane_ids(["a"]) == [""]
+    assert w.pose_mismatches == before + 1
