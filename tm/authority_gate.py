@@ -12,15 +12,9 @@ changes is where they apply:
   the gate's shared guard boxes, :meth:`AuthorityGate.guard_radius`, take the largest, and a
   class's own guard is tested by shrinking its boxes by the difference);
 * **entry line**: without the zone's token a vehicle may not move its stop point to a waypoint
-  whose hold box ``T^0 ⊕ footprint`` meets the shared guard (the largest class's) -- its stop
-  point stays behind the guard's edge less the ``T^0`` extent and ``L/2``
-  (:meth:`AuthorityGate.intervals`).  Not its own class's guard: a holder's claims reach as far
-  as its class's guard, and a waiter standing inside them keeps the holder from moving while it
-  waits for the holder's token (measured on ``grid``, authority, seed 2: a bus turning at a
-  junction, its rear's claim swung into the next lane, where a truck waited at the truck's
-  entry line; 10 vehicles stood from ~320 s to the 894 s cap);
-* **exit slot**: the first waypoint after the entry whose hold box misses its class's guard
-  again.  With
+  whose hold box ``T^0 ⊕ footprint`` meets the guard -- its stop point stays behind the guard's
+  edge less the ``T^0`` extent and ``L/2`` (:meth:`AuthorityGate.intervals`);
+* **exit slot**: the first waypoint after the entry whose hold box misses the guard again.  With
   the token the stop point may move up to it (and on, outside the guard, without one); the token
   is handed out only with room there for the stopped vehicle: no other vehicle's claim on the
   slot's hold box;
@@ -172,12 +166,9 @@ class AuthorityGate(JunctionGate):
         """``(zone, entry, exit, exits)``: the runs of waypoints of row ``row``'s route whose hold
         box (``T^0 ⊕ footprint`` at the arriving and leaving headings) meets a zone's guard.
 
-        ``entry`` is the first waypoint whose hold box meets the shared guard (every class's
-        claims reach: the stop point may move there only with the zone's token), ``exit`` the
-        first after the run through its class's guard whose hold box misses that guard (the exit
+        ``entry`` is the first waypoint of a run (the stop point may move there only with the
+        zone's token), ``exit`` the first after it whose hold box misses the guard (the exit
         slot), or the last waypoint when the route ends inside the guard (``exits`` False).
-        Runs are those through its class's guard: a route that meets only the shared guard's
-        margin needs no token.
         Cached per vehicle: they depend on its route only."""
         vid = fleet.ids[row]
         found = self._spans.get(vid)
@@ -185,29 +176,16 @@ class AuthorityGate(JunctionGate):
             return found
         W, H, _ = fleet.route(row)
         c = fleet.family[row]
-        half = self.classes[c].hold_half(H, np.r_[H[1:], H[-1:]])
-        z, first, last = self._runs(W, half - self._shrink[c])  # its class's guard: the exit slots
-        exits = last + 1 < len(W)
-        # the entry line keeps the waiter out of the shared guard: out of every class's claims
-        zs, fs, ls = self._runs(W, half)
-        entry = first.copy()
-        for q in range(len(z)):
-            hit = np.flatnonzero((zs == z[q]) & (fs <= first[q]) & (first[q] <= ls))
-            if len(hit):
-                entry[q] = fs[hit[0]]
-        found = self._spans[vid] = (z, entry, np.where(exits, last + 1, len(W) - 1), exits)
-        return found
-
-    def _runs(self, W: np.ndarray, half: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``(zone, first, last)``: the runs of consecutive waypoints whose boxes ``W ± half``
-        meet a zone's (shared) guard, by zone, then along the route."""
+        half = self.classes[c].hold_half(H, np.r_[H[1:], H[-1:]]) - self._shrink[c]  # its class's guard
         i, z = self.guards.pairs(W - half, W + half)
         o = np.lexsort((i, z))
         i, z = i[o], z[o]
         run = np.r_[True, (z[1:] != z[:-1]) | (i[1:] != i[:-1] + 1)] if len(i) else np.zeros(0, dtype=bool)
         starts = np.flatnonzero(run)
         last = i[np.r_[starts[1:], len(i)] - 1] if len(i) else np.zeros(0, dtype=np.intp)
-        return z[starts], i[starts], last
+        exits = last + 1 < len(W)
+        found = self._spans[vid] = (z[starts], i[starts], np.where(exits, last + 1, len(W) - 1), exits)
+        return found
 
     def _span_of(self, fleet: JunctionFleet, row: int, z: int, target: int):
         """``(entry, exit, exits)`` of zone ``z``'s interval holding waypoint ``target``, or None."""

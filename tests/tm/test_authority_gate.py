@@ -89,28 +89,23 @@ def test_the_guard_is_the_zone_plus_the_claims_across_half_width_and_the_footpri
 
 def test_each_class_has_its_own_guard():
     """With a bus class (claims 1.4 m across, 12 m x 2.5 m: its guard reaches 7.53 m past the zone)
-    the gate's shared guard boxes grow to the bus's.  A car's entry line is the shared guard's (a
-    waiter stays out of every holder's claims: a bus's claims reach past the car's guard), but its
-    exit slot and release stay its own: a car whose tail is 0.2 m outside the car's guard (well
-    inside the bus's) gives its token back."""
+    the gate's shared guard boxes grow to the bus's, but a car's entry line, exit slot and release
+    stay its own: a car whose tail is 0.2 m outside the car's guard (well inside the bus's) gives
+    its token back."""
     bus = AuthorityReach(hold=0.25, hold_y=0.2, across=1.4, length=12.0, width=2.5, delta=1.0)
     g_bus = 5.0 + 1.4 + 0.5 * np.hypot(12.0, 2.5)
     gate = AuthorityGate([J], {"car": CAR, "bus": bus})
     np.testing.assert_allclose(gate.hi[0], [g_bus, g_bus], rtol=0, atol=1e-12)
-    # car: x - 30 + 2.25 meets the shared guard from x = -14 (index 16), the car's own from index 20
-    entry = 16
-    W = _route(*EAST)[0]
-    assert W[entry - 1, 0] + HOLD[0] < -g_bus < W[entry, 0] + HOLD[0]
-    scene = Scene({"A": EAST, "B": NORTH}, k={"A": entry - 1, "B": entry - 1})
+    scene = Scene({"A": EAST, "B": NORTH}, k={"A": ENTRY - 1, "B": ENTRY - 1})
     fleet = scene.fleet()
-    assert [a.tolist() for a in gate.intervals(fleet, 0)] == [[0], [entry], [EXIT], [True]]
+    assert [a.tolist() for a in gate.intervals(fleet, 0)] == [[0], [ENTRY], [EXIT], [True]]
     bus_fleet = JunctionFleet(["Q"], np.array(["bus"]), fleet.claim_lo[:1], fleet.claim_hi[:1],
                               (([scene.routes[0][0]], [scene.routes[0][1]], np.array([0])),))
     # bus: x - 30 + 6.25 meets the guard from x = -18 (index 12); leaves it at x = 19 (index 49)
     assert [a.tolist() for a in gate.intervals(bus_fleet, 0)] == [[0], [12], [49], [True]]
     assert scene.withhold(gate, t=0) == {"A"}
     claim = ((GUARD + 0.2, -1.6 - HOLD[1]), (15.0 + HOLD[0], -1.6 + HOLD[1]))
-    scene = Scene({"A": EAST, "B": NORTH}, k={"A": EXIT + 4, "B": entry - 1}, claims={"A": claim})
+    scene = Scene({"A": EAST, "B": NORTH}, k={"A": EXIT + 4, "B": ENTRY - 1}, claims={"A": claim})
     assert GUARD + 0.2 < g_bus and scene.withhold(gate, t=1) == {"A", "B"} and _holders(gate) == {"B"}
 
 
