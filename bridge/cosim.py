@@ -33,7 +33,7 @@ import numpy as np
 from controllers.classes import VehicleClass
 from controllers.plant import DISTURBANCES, step as plant_step
 from controllers.settings import ControllerSettings, SynthesisSettings
-from controllers.speed_limits import SpeedSettings, free_flow_time, route_speeds
+from controllers.speed_limits import SpeedSettings, free_flow_time, restart_slack, route_speeds
 from controllers.stmpc import STMPC
 from bridge.groups import _Group, _headings
 from controllers.synthesis import synthesize
@@ -318,7 +318,8 @@ class Cosim:
                 # a binding speed bound asks for a grant with slack (SpeedSettings.slack_steps) and
                 # only for one whose tube lets the vehicle keep the bound (a stopped vehicle always asks)
                 inside = lp <= g.ctl.N
-                want = lp + g.slack(Ts, 1, g.cap)
+                # at rest and denied: ask without slack (its claim would reach behind it: liveness)
+                want = lp + restart_slack(g.slack(Ts, 1, g.cap), g.l, g.denied_last)
                 may = has & g.ctl.may_request(g.X, cen, hd, lp, g.cap if self.authority else None)
                 may &= (want <= g.ctl.N) | (g.l == 0)
                 lp = np.where(inside, np.minimum(want, g.ctl.N), lp)
