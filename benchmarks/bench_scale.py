@@ -277,17 +277,17 @@ class TimedSumoAdapter(SumoAdapter):
         self._move = 0.0
         self._insert = 0.0
 
-    def move(self, ids, xy_front, angle_deg) -> None:
+    def move(self, ids, xy_front, angle_deg, *args, **kwargs) -> None:
         t = time.perf_counter()
         try:
-            super().move(ids, xy_front, angle_deg)
+            super().move(ids, xy_front, angle_deg, *args, **kwargs)
         finally:
             self._move += time.perf_counter() - t
 
-    def admit(self, vehicle, xy_front, angle_deg, *, depart_lane=None) -> None:
+    def admit(self, vehicle, xy_front, angle_deg, **kwargs) -> None:
         t = time.perf_counter()
         try:
-            super().admit(vehicle, xy_front, angle_deg, depart_lane=depart_lane)
+            super().admit(vehicle, xy_front, angle_deg, **kwargs)
         finally:
             self._insert += time.perf_counter() - t
 
