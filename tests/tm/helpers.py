@@ -128,3 +128,16 @@ def random_fleet(rng: np.random.Generator, families: dict, n: int, spread: float
         width=np.array([k[5] for k in kept]), requesting=req,
         req_centre=np.array([k[1] for k in kept]).reshape(V, 2) + rng.uniform(-hop, hop, size=(V, 2)),
         req_index=(rng.random(V) * (N + 1)).astype(int), req_heading=rng.uniform(-np.pi, np.pi, size=V))
+
+
+def disturb(m, x, u, c, policy, rng, sign):
+    """A disturbance in D for the reach-claim property tests: ``random`` (uniform in D),
+    ``adversarial`` (the vertex of D pushing the nominal successor away from target ``c``), or
+    else ``sign`` times the upper vertex of D at every step ("push")."""
+    lo, hi = m.d_bounds
+    if policy == "random":
+        return lo + (hi - lo) * rng.random(m.n)
+    if policy == "adversarial":
+        err = m.A @ x + m.B @ u - np.concatenate([c, np.zeros(m.n - 2)])
+        return np.where(err >= 0, hi, lo)
+    return sign * hi

@@ -17,6 +17,7 @@ from tm.lane import Lane, LaneSettings, lane_class
 from tm.manager import FleetState, TrafficManager
 from tm.settings import TMSettings
 from tm.reach import ReachModel, claims_conflict, pairwise_conflicts, reach_claims
+from tests.tm.helpers import disturb as _disturb
 
 URBAN = ("car", "bus", "truck")
 
@@ -32,15 +33,6 @@ def _point_model(lc):
     r = lc.reach
     return ReachModel(r.Ak_al, r.Ak_ac, r.r_al, r.r_ac, r.tables, 0.0, 0.0)
 
-
-def _disturb(m, x, u, c, policy, rng, sign):
-    lo, hi = m.d_bounds
-    if policy == "random":
-        return lo + (hi - lo) * rng.random(m.n)
-    if policy == "adversarial":
-        err = m.A @ x + m.B @ u - np.concatenate([c, np.zeros(m.n - 2)])
-        return np.where(err >= 0, hi, lo)
-    return sign * hi  # "push": every component at one vertex of D, all along the run
 
 
 @hsettings(max_examples=30, deadline=None)

@@ -16,6 +16,7 @@ from tm.lane import Lane, LaneSettings, lane_class
 from tm.reach import (ReachClaims, _boxes_overlap, claims_conflict, pad_slots, pairwise_conflicts, reach_claims,
                       slot_aabb, world_aabb)
 from tm.reach_book import tube_escapes
+from tests.tm.helpers import disturb as _disturb
 from tm.reach_cache import ClaimCache
 
 URBAN = ("car", "bus", "truck")
@@ -38,15 +39,6 @@ class _Book:
         return ReachClaims.concat(*[pad_slots(reach_claims(self.models[c], X, C, H, np.minimum(L, self.models[c].N)),
                                               self.K) for c, _, X, C, H, L in parts])
 
-
-def _disturb(m, x, u, c, policy, rng, sign):
-    lo, hi = m.d_bounds
-    if policy == "random":
-        return lo + (hi - lo) * rng.random(m.n)
-    if policy == "adversarial":
-        err = m.A @ x + m.B @ u - np.concatenate([c, np.zeros(m.n - 2)])
-        return np.where(err >= 0, hi, lo)
-    return sign * hi
 
 
 def _contains(outer: ReachClaims, inner: ReachClaims) -> bool:
