@@ -236,10 +236,6 @@ class Cosim:
                                  slack_steps=sp.slack_steps) for c, vc in self.classes.items()}
         #: per-route speed tables (controllers.speed_limits), built on admission
         self._lat_accel = sp.lat_accel if (self.authority and sp.curves) else None
-        for s_ in specs:
-            if s_.speed_limits is not None and len(np.asarray(s_.speed_limits)) != len(s_.waypoints):
-                raise ValueError(f"vehicle {s_.id}: speed_limits has {len(np.asarray(s_.speed_limits))} "
-                                 f"entries, one per waypoint ({len(s_.waypoints)}) is needed")
         self.tm = TrafficManager(settings.tm, {c: f.position_sets for c, f in self.families.items()},
                                  rotating=[c for c, vc in self.classes.items() if vc.model.frame == "road"])
         self.monitor = Monitor(settings.tm.check)
@@ -248,6 +244,9 @@ class Cosim:
         self.records = {s.id: VehicleRecord(s.id, s.vclass, s.depart_s, s.route_length_m) for s in specs}
         self._speeds = {}
         for s_ in specs:  # validated speed tables and free-flow times, before anything runs
+            if s_.speed_limits is not None and len(np.asarray(s_.speed_limits)) != len(s_.waypoints):
+                raise ValueError(f"vehicle {s_.id}: speed_limits has {len(np.asarray(s_.speed_limits))} "
+                                 f"entries, one per waypoint ({len(s_.waypoints)}) is needed")
             self._route_speeds(s_)
         self.rng = np.random.default_rng(settings.seed)
         self.t = 0

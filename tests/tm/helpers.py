@@ -141,3 +141,13 @@ def disturb(m, x, u, c, policy, rng, sign):
         err = m.A @ x + m.B @ u - np.concatenate([c, np.zeros(m.n - 2)])
         return np.where(err >= 0, hi, lo)
     return sign * hi
+
+
+def lane_fleet(lane, lcs, classes, gaps, k0: int = 40) -> int:
+    """Place one vehicle per class on ``lane`` (a :class:`tm.lane.Lane`) at rest, from waypoint
+    ``k0`` on, ``gaps`` waypoints apart; returns the waypoint after the last one placed."""
+    k = k0
+    for c, g in zip(classes, gaps):
+        lane.place(lcs[c], k)
+        k += g
+    return k

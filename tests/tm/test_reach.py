@@ -17,7 +17,7 @@ from tm.lane import Lane, LaneSettings, lane_class
 from tm.manager import FleetState, TrafficManager
 from tm.settings import TMSettings
 from tm.reach import ReachModel, claims_conflict, pairwise_conflicts, reach_claims
-from tests.tm.helpers import disturb as _disturb
+from tests.tm.helpers import disturb as _disturb, lane_fleet
 
 URBAN = ("car", "bus", "truck")
 
@@ -99,10 +99,7 @@ def test_random_fleets_on_a_lane_never_touch(lcs, classes, gaps, check, policy, 
     manager's policies (decide_reach): after every decision and every step the claims are
     pairwise disjoint, no two footprints overlap, the index invariant holds."""
     lane = Lane(LaneSettings(check=check, disturbance=policy, seed=seed, policy=tm))
-    k = 40
-    for c, g in zip(classes, gaps):
-        lane.place(lcs[c], k)
-        k += g
+    k = lane_fleet(lane, lcs, classes, gaps)
     assume(len(pairwise_conflicts(lane.all_claims(), check)[0]) == 0)
     lane.stop_k = k + 5
     lane.deny_all = deny

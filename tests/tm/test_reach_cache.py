@@ -16,7 +16,7 @@ from tm.lane import Lane, LaneSettings, lane_class
 from tm.reach import (ReachClaims, _boxes_overlap, claims_conflict, pad_slots, pairwise_conflicts, reach_claims,
                       slot_aabb, world_aabb)
 from tm.reach_book import tube_escapes
-from tests.tm.helpers import disturb as _disturb
+from tests.tm.helpers import disturb as _disturb, lane_fleet
 from tm.reach_cache import ClaimCache
 
 URBAN = ("car", "bus", "truck")
@@ -172,10 +172,7 @@ def test_decisions_on_reused_claims_never_grant_a_fresh_conflict(lcs, classes, g
     claims: after every decision the claims in force and the fresh claims of the same states (granted:
     their new claims) are pairwise disjoint; no footprint overlap, no index violation; claims were reused."""
     lane = Lane(LaneSettings(check=check, disturbance=policy, seed=seed, policy=tm, reuse=True))
-    k = 40
-    for c, g in zip(classes, gaps):
-        lane.place(lcs[c], k)
-        k += g
+    k = lane_fleet(lane, lcs, classes, gaps)
     assume(len(pairwise_conflicts(lane.all_claims(), check)[0]) == 0)
     lane.stop_k = k + 5
     for t in range(120):
