@@ -469,7 +469,7 @@ class Cosim:
         return replace(state, requesting=req)
 
     def _spec_pads(self, sp: VehicleSpec) -> np.ndarray:
-        """The claims' footprint padding (2,) of ``sp`` at rest on its first waypoint, preparing the
+        """The claims' footprint padding (4,) of ``sp`` at rest on its first waypoint, preparing the
         world's padding of its route (``world.register_pads``, SUMO: :mod:`bridge.sumo_body`): how
         far the world's own body reaches beyond the rectangle, for the positions the class's sets
         hold in a waypoint's frame (``T^N``'s projection, cut :data:`~bridge.sumo_body.AHEAD_M`
@@ -483,16 +483,16 @@ class Cosim:
                 hi = (self._ahead(sp.vclass), float(T.y_hi[T.N]))
                 pads = fn(sp, lo, hi)
             if pads is None:
-                pads = np.zeros(2)
+                pads = np.zeros(4)
             self._pads[sp.id] = pads
         return pads
 
     def _group_pads(self, g: _Group, offset: int = 0) -> np.ndarray:
-        """The claims' footprint padding (n, 2) of a group's vehicles for waypoints ``k + offset``
+        """The claims' footprint padding (n, 4) of a group's vehicles for waypoints ``k + offset``
         (``world.claim_pads``; zeros without it or in paper mode)."""
         fn = getattr(self.world, "claim_pads", None)
         pads = fn(g.ids, np.minimum(g.k + offset, g.K - 1)) if (self.authority and fn is not None) else None
-        return np.zeros((len(g.ids), 2)) if pads is None else pads
+        return np.zeros((len(g.ids), 4)) if pads is None else pads
 
     def _ahead(self, vclass: str) -> float:
         """How far past its waypoint (along its frame) a vehicle's position may be for the padding."""
@@ -568,7 +568,7 @@ class Cosim:
             if len(idx):
                 X = self.classes[c].model.equilibrium(cand.centre[idx])
                 ctl = self.groups[c].ctl
-                pads = np.array([self._spec_pads(ready[i]) for i in idx]).reshape(-1, 2)
+                pads = np.array([self._spec_pads(ready[i]) for i in idx]).reshape(len(idx), -1)
                 parts.append((c, X, cand.centre[idx], cand.heading[idx],
                               ctl.index(X, cand.centre[idx], cand.heading[idx]), pads))
                 rows.append(idx)

@@ -268,8 +268,12 @@ class PadTable:
             self.step[1:] = np.maximum(self.step[1:], dd)
 
     def pads(self, k: int, sigma_lo: float) -> np.ndarray:
-        """``(along, across) >= 0``: the padding of waypoint ``k``'s claims for a vehicle whose
-        reference point stays at arc ``>= sigma_lo`` (non-increasing in ``sigma_lo``)."""
+        """``(back, front, right, left) >= 0``: the padding of waypoint ``k``'s claims for a vehicle
+        whose reference point stays at arc ``>= sigma_lo``, one-sided: how far SUMO's body reaches
+        beyond each side of the rectangle in the waypoint's frame (non-increasing in ``sigma_lo``;
+        :func:`tm.reach.split_pad`).  One-sided because the body of a turn lies off-centre (the
+        chord between front and back cuts the inside of the curve): symmetric pads claimed the
+        larger side on both and on ``grid`` locked junctions (issue 12)."""
         k = int(min(max(k, 0), len(self.W) - 1))
         j0 = int(np.searchsorted(self.sig, sigma_lo, side="left"))
         hit = self._memo.get((k, j0))
@@ -282,7 +286,7 @@ class PadTable:
     def _pads(self, k: int, j0: int) -> np.ndarray:
         j1 = int(np.searchsorted(self.sig, self.arc_k[k] + self.box_hi[0] + 2.0 * self.length, side="right"))
         if j1 <= j0:
-            return np.zeros(2)
+            return np.zeros(4)
         c, s = np.cos(self.H[k]), np.sin(self.H[k])
         d = self.ref[j0:j1] - self.W[k]
         a = c * d[..., 0] + s * d[..., 1]
@@ -290,10 +294,12 @@ class PadTable:
         inside = ((a >= self.box_lo[0]) & (a <= self.box_hi[0]) &
                   (y >= self.box_lo[1]) & (y <= self.box_hi[1])).any(axis=1)
         if not inside.any():
-            return np.zeros(2)
+            return np.zeros(4)
         r = self.rel[j0:j1][inside]
         st = self.step[j0:j1][inside]
-        ra = np.abs(c * r[..., 0] + s * r[..., 1]).max(axis=(1, 2)) + st
-        ry = np.abs(-s * r[..., 0] + c * r[..., 1]).max(axis=(1, 2)) + st
-        return np.array([max(0.0, float(ra.max()) - 0.5 * self.length),
-                         max(0.0, float(ry.max()) - 0.5 * self.width)])
+        ra = c * r[..., 0] + s * r[..., 1]   # corners relative to the position, along the frame
+        ry = -s * r[..., 0] + c * r[..., 1]  # and across (left +)
+        reach = np.array([(-ra).max(axis=(1, 2)), ra.max(axis=(1, 2)),
+                          (-ry).max(axis=(1, 2)), ry.max(axis=(1, 2))]) + st  # back, front, right, left
+        half = 0.5 * np.array([self.length, self.length, self.width, self.width])
+        return np.maximum(reach.max(axis=1) - half, 0.0)

@@ -106,7 +106,7 @@ class SumoWorld:
 
     def register_pads(self, spec: VehicleSpec, box_lo, box_hi) -> np.ndarray | None:
         """Prepare the claims' padding of ``spec`` (:class:`bridge.sumo_body.PadTable`) for positions
-        in ``[box_lo, box_hi]`` of each waypoint's frame; returns the padding (2,) of a vehicle at
+        in ``[box_lo, box_hi]`` of each waypoint's frame; returns the padding (4,) of a vehicle at
         rest on its first waypoint (None without the network's geometry)."""
         if self.net is None:
             return None
@@ -123,12 +123,12 @@ class SumoWorld:
         return t.pads(0, t.arc_k[0] - BACK_M)
 
     def claim_pads(self, ids, k) -> np.ndarray | None:
-        """The claims' padding (n, 2) of vehicles ``ids`` for their waypoints ``k`` (n,), for the
+        """The claims' padding (n, 4), one-sided (:meth:`bridge.sumo_body.PadTable.pads`), of vehicles ``ids`` for their waypoints ``k`` (n,), for the
         positions still ahead of them (from the furthest reference point reached, less
         :data:`~bridge.sumo_body.BACK_M`); None without the network's geometry."""
         if self.net is None:
             return None
-        out = np.zeros((len(ids), 2))
+        out = np.zeros((len(ids), 4))
         for i, (v, kk) in enumerate(zip(ids, np.asarray(k).tolist())):
             t = self._pads.get(v)
             if t is not None:

@@ -42,7 +42,7 @@ from controllers.tolerances import GEOMETRY_TOL, REACH_LOOKUP_MARGIN
 from tm.geometry import broad_phase
 
 __all__ = ["ReachModel", "ReachClaims", "reach_claims", "claims_conflict", "pairwise_conflicts", "world_aabb",
-           "candidate_pairs", "pad_slots", "slot_aabb", "union_aabb", "PREFILTER_TOL_FACTOR"]
+           "candidate_pairs", "pad_slots", "split_pad", "slot_aabb", "union_aabb", "PREFILTER_TOL_FACTOR"]
 
 #: The per-slot world bounding boxes that pre-filter the ``timed`` check are compared with
 #: ``PREFILTER_TOL_FACTOR * tol``: two oriented boxes that the separating-axis test with ``tol``
@@ -204,10 +204,11 @@ def reach_claims(rm: ReachModel, X: np.ndarray, centre: np.ndarray, heading: np.
         Membership index of ``x`` w.r.t. ``centre`` (``<= N``).
     body_offset : float or ndarray (n,)
         Largest angle (rad) between the body and the segment over the claim.
-    body_pad : ndarray (n, 2), optional
-        How far (m, along and across the segment) the simulator's body may reach beyond the
-        footprint rectangle centred on the position (e.g. SUMO's lane-following body around turns,
-        :meth:`bridge.sumo_body.RouteBody.pads`); added to the footprint's half extents.
+    body_pad : ndarray (n, 2) or (n, 4), optional
+        How far (m) the simulator's body may reach beyond the footprint rectangle centred on the
+        position (e.g. SUMO's lane-following body around turns, :meth:`bridge.sumo_body.PadTable.pads`):
+        ``(along, across)`` on both sides, or one-sided ``(back, front, right, left)``
+        (:func:`split_pad`); added to the footprint's half extents on those sides.
     """
     X = np.asarray(X, dtype=float)
     centre = np.asarray(centre, dtype=float)
@@ -233,12 +234,11 @@ def reach_claims(rm: ReachModel, X: np.ndarray, centre: np.ndarray, heading: np.
     c, s = np.abs(np.cos(off)), np.abs(np.sin(off))
     fx = 0.5 * (rm.length * c + rm.width * s)
     fy = 0.5 * (rm.length * s + rm.width * c)
+    fx_lo, fx_hi, fy_lo, fy_hi = fx, fx, fy, fy
     if body_pad is not None:
-        pad = np.asarray(body_pad, dtype=float).reshape(n, 2)
-        if np.any(pad < 0) or not np.all(np.isfinite(pad)):
-            raise ValueError("reach_claims: body_pad must be finite and >= 0")
-        fx, fy = fx + pad[:, 0], fy + pad[:, 1]
-    fx, fy = fx[:, None], fy[:, None]
+        plo, phi = split_pad(body_pad, n)
+        fx_lo, fy_lo, fx_hi, fy_hi = fx + plo[:, 0], fy + plo[:, 1], fx + phi[:, 0], fy + phi[:, 1]
+    fx_lo, fx_hi, fy_lo, fy_hi = fx_lo[:, None], fx_hi[:, None], fy_lo[:, None], fy_hi[:, None]
     P = np.empty((4, n, K))  # along lo, hi, across lo, hi (segment frame, footprint added below)
     # tables read just outside the velocity bounds (REACH_LOOKUP_MARGIN: ties at grid points)
     np.maximum(np.maximum(cp - ra[:, 0], T.h(mm, v_hi + REACH_LOOKUP_MARGIN)), T.p_lo[mm], out=P[0, :, :Kr])
@@ -248,16 +248,31 @@ def reach_claims(rm: ReachModel, X: np.ndarray, centre: np.ndarray, heading: np.
     P[0, :, Kr:], P[1, :, Kr:] = T.p_lo[0], T.p_hi[0]
     P[2, :, Kr:], P[3, :, Kr:] = T.y_lo[0], T.y_hi[0]
     empty = (P[0] > P[1]) | (P[2] > P[3])
-    P[0] -= fx
-    P[1] += fx
-    P[2] -= fy
-    P[3] += fy
+    P[0] -= fx_lo
+    P[1] += fx_hi
+    P[2] -= fy_lo
+    P[3] += fy_hi
     if empty.any():  # keep empty boxes empty after the footprint
         P[0][empty] = P[2][empty] = np.inf
         P[1][empty] = P[3][empty] = -np.inf
     lo = np.stack([P[0], P[2]], axis=-1)
     hi = np.stack([P[1], P[3]], axis=-1)
     return ReachClaims(centre, heading, lo, hi)._with_boxes(_slot_aabb_planar(centre, heading, *P))
+
+
+def split_pad(pad, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """A footprint padding as ``(lo, hi)`` (n, 2) each: how far beyond the rectangle's low sides
+    (back, right) and high sides (front, left) of the segment frame.  ``pad`` is (n, 2) ``(along,
+    across)``, both sides alike, or (n, 4) one-sided ``(back, front, right, left)``."""
+    p = np.asarray(pad, dtype=float)
+    if p.size not in (2 * n, 4 * n) or p.ndim > 2 or (p.ndim == 2 and p.shape[0] != n):
+        raise ValueError(f"body_pad: need (n, 2) or (n, 4) for n = {n} vehicles, got shape {p.shape}")
+    p = p.reshape(n, -1) if n else p.reshape(0, 2)
+    if np.any(p < 0) or not np.all(np.isfinite(p)):
+        raise ValueError("body_pad must be finite and >= 0")
+    if p.shape[1] == 2:
+        return p, p
+    return p[:, [0, 2]], p[:, [1, 3]]
 
 
 def pad_slots(c: ReachClaims, K: int) -> ReachClaims:

@@ -15,7 +15,7 @@ import numpy as np
 from controllers.authority import build_tables
 from controllers.synthesis import SetFamily, rotate_pairs
 from controllers.tolerances import GEOMETRY_TOL
-from tm.reach import ReachClaims, ReachModel, candidate_pairs, claims_conflict, reach_claims, world_aabb
+from tm.reach import ReachClaims, ReachModel, candidate_pairs, claims_conflict, reach_claims, split_pad, world_aabb
 
 __all__ = ["ReachBook", "tube_escapes", "footprint_claims", "admit_reach"]
 
@@ -56,14 +56,14 @@ class ReachBook:
 
 
 def footprint_claims(position, heading, length, width, K: int = 1, pad=None) -> ReachClaims:
-    """The footprints now as claims (every slot the footprint, widened by ``pad`` (n, 2) when given):
+    """The footprints now as claims (every slot the footprint, widened by ``pad`` (n, 2) or one-sided (n, 4) when given):
     what a new vehicle must miss when it appears, besides the others' claims from the next step on."""
     position = np.asarray(position, dtype=float).reshape(-1, 2)
     half = 0.5 * np.column_stack([np.asarray(length, dtype=float), np.asarray(width, dtype=float)])
-    if pad is not None:
-        half = half + np.asarray(pad, dtype=float).reshape(-1, 2)
-    lo = np.repeat(-half[:, None, :], K, axis=1)
-    return ReachClaims(position, np.asarray(heading, dtype=float), lo, -lo)
+    plo, phi = split_pad(pad, len(position)) if pad is not None else (0.0, 0.0)
+    lo = np.repeat((-half - plo)[:, None, :], K, axis=1)
+    hi = np.repeat((half + phi)[:, None, :], K, axis=1)
+    return ReachClaims(position, np.asarray(heading, dtype=float), lo, hi)
 
 
 def tube_escapes(claims: ReachClaims, position, length, width, tol: float = GEOMETRY_TOL,
@@ -73,15 +73,14 @@ def tube_escapes(claims: ReachClaims, position, length, width, tol: float = GEOM
 
     ``claims``: the claims in force after the decision of step ``t`` (the box of slot 1 was built
     with ``body_offset = 0``: half footprint ``(length, width) / 2`` in the segment frame, plus the
-    ``body_pad`` the claims were built with, ``pad`` (n, 2))."""
+    ``body_pad`` the claims were built with, ``pad`` (n, 2) or (n, 4): :func:`tm.reach.split_pad`)."""
     position = np.asarray(position, dtype=float).reshape(-1, 2)
     if len(position) != len(claims):
         raise ValueError(f"tube_escapes: {len(claims)} claims for {len(position)} positions")
     e = rotate_pairs(position - claims.centre, -claims.heading)
     half = 0.5 * np.column_stack([np.asarray(length, dtype=float), np.asarray(width, dtype=float)])
-    if pad is not None:
-        half = half + np.asarray(pad, dtype=float).reshape(-1, 2)
-    lo, hi = claims.lo[:, 0] + half, claims.hi[:, 0] - half
+    plo, phi = split_pad(pad, len(position)) if pad is not None else (0.0, 0.0)
+    lo, hi = claims.lo[:, 0] + half + plo, claims.hi[:, 0] - half - phi
     return np.any((e < lo - tol) | (e > hi + tol), axis=1)
 
 

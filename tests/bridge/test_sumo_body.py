@@ -74,12 +74,30 @@ def test_padding_covers_sumo_body(net, seed, frac, lat, edges, size):
     a, y = c * d[0] + s * d[1], -s * d[0] + c * d[1]
     if not (box_lo[0] <= a <= box_hi[0] and box_lo[1] <= y <= box_hi[1]):
         return  # not a position the waypoint's claims hold
-    pad = table.pads(k, lo)
+    pad = table.pads(k, lo)  # one-sided: back, front, right, left
     rel = corners[0] - p
-    ra = np.abs(c * rel[:, 0] + s * rel[:, 1])
-    ry = np.abs(-s * rel[:, 0] + c * rel[:, 1])
-    assert np.all(ra <= size_[0] / 2 + pad[0] + 1e-9)
-    assert np.all(ry <= size_[1] / 2 + pad[1] + 1e-9)
+    ra = c * rel[:, 0] + s * rel[:, 1]
+    ry = -s * rel[:, 0] + c * rel[:, 1]
+    assert np.all(-ra <= size_[0] / 2 + pad[0] + 1e-9)
+    assert np.all(ra <= size_[0] / 2 + pad[1] + 1e-9)
+    assert np.all(-ry <= size_[1] / 2 + pad[2] + 1e-9)
+    assert np.all(ry <= size_[1] / 2 + pad[3] + 1e-9)
+
+
+@pytest.mark.parametrize("edges", [LEFT, RIGHT])
+def test_padding_one_sided_in_a_turn(net, edges):
+    """In a turn SUMO's body (the chord between front and back) lies off the rectangle's centre:
+    the padding of some waypoint is at least 0.3 m smaller on one side than on the opposite one
+    (a symmetric padding would claim the larger on both: on ``grid`` that locked junctions,
+    issue 12), and every pad stays >= 0."""
+    r = _route(net, edges)
+    b = RouteBody(r, net, *TRUCK)
+    W, arc = r.waypoints, r.arc_length
+    table = b.pad_table(arc, W, _headings(W), (-40.0, -OFFSET_MAX_M), (1.2, OFFSET_MAX_M))
+    P = np.array([table.pads(k, arc[k] - 10.0) for k in range(len(W))])
+    assert np.all(P >= 0)
+    gap = np.maximum(np.abs(P[:, 0] - P[:, 1]), np.abs(P[:, 2] - P[:, 3]))
+    assert gap.max() >= 0.3
 
 
 def test_padding_zero_on_a_straight(net):

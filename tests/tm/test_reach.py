@@ -230,3 +230,46 @@ def test_body_pad_widens_every_box_by_exactly_the_pad(lcs, c, seed, heading, fra
     assert tube_escapes(padded, out, [L], [Wd], pad=np.array([pad]))[0]
     with pytest.raises(ValueError, match="body_pad"):
         reach_claims(lc.reach, X, cen, hd, l, body_pad=np.array([[-0.1, 0.0]]))
+
+
+@hsettings(max_examples=30, deadline=None)
+@given(c=st.sampled_from(URBAN), seed=st.integers(0, 2 ** 31), heading=st.floats(-np.pi, np.pi),
+       frac=st.floats(0.0, 1.0), pad=st.tuples(*[st.floats(0.0, 3.0)] * 4))
+def test_one_sided_body_pad_moves_each_side_by_its_own_pad(lcs, c, seed, heading, frac, pad):
+    """A one-sided ``body_pad`` ``(back, front, right, left)`` (bridge.sumo_body.PadTable.pads)
+    moves each side of every non-empty box by its own pad and no other (tolerance 1e-9 m,
+    round-off), and :func:`tm.reach_book.tube_escapes` / :func:`tm.reach_book.footprint_claims`
+    read it the same way: a position 0.1 m past ``S_1``'s position box on either side escapes,
+    ``S_1``'s middle does not."""
+    from tm.reach_book import footprint_claims, tube_escapes
+
+    lc = lcs[c]
+    fam = lc.ctl.family
+    rng = np.random.default_rng(seed)
+    E = fam.sample(int(round(frac * fam.N)), 1, rng)
+    cen = rng.uniform(-100, 100, (1, 2))
+    hd = np.full(1, heading)
+    X = rotate_pairs(E, hd) + np.hstack([cen, np.zeros((1, 2))])
+    l = lc.ctl.index(X, cen, hd)
+    assume(l[0] <= fam.N)
+    p = np.array([pad])
+    plo, phi = np.array([pad[0], pad[2]]), np.array([pad[1], pad[3]])
+    base = reach_claims(lc.reach, X, cen, hd, l)
+    padded = reach_claims(lc.reach, X, cen, hd, l, body_pad=p)
+    ok = (base.lo <= base.hi).all(axis=-1)
+    np.testing.assert_allclose(padded.lo[ok], base.lo[ok] - plo, atol=1e-9)
+    np.testing.assert_allclose(padded.hi[ok], base.hi[ok] + phi, atol=1e-9)
+    assert np.all(padded.lo[~ok] > padded.hi[~ok])
+    L, Wd = lc.reach.length, lc.reach.width
+    half = np.array([0.5 * L, 0.5 * Wd])
+    plo_box, phi_box = padded.lo[0, 0] + half + plo, padded.hi[0, 0] - half - phi  # S_1's positions
+    mid = 0.5 * (plo_box + phi_box)
+    assert not tube_escapes(padded, cen + rotate_pairs(mid[None], hd), [L], [Wd], pad=p)[0]
+    for e in ([phi_box[0] + 0.1, mid[1]], [plo_box[0] - 0.1, mid[1]],
+              [mid[0], phi_box[1] + 0.1], [mid[0], plo_box[1] - 0.1]):
+        assert tube_escapes(padded, cen + rotate_pairs(np.array([e]), hd), [L], [Wd], pad=p)[0]
+    fp = footprint_claims(cen, hd, [L], [Wd], K=2, pad=p)
+    np.testing.assert_allclose(fp.lo[0], np.tile(-half - plo, (2, 1)), atol=1e-12)
+    np.testing.assert_allclose(fp.hi[0], np.tile(half + phi, (2, 1)), atol=1e-12)
+    with pytest.raises(ValueError, match="body_pad"):
+        reach_claims(lc.reach, X, cen, hd, l, body_pad=np.zeros((1, 3)))
