@@ -226,11 +226,9 @@ class Cosim:
         self.reach = ReachBook(self.families, {c: (vc.length, vc.width) for c, vc in self.classes.items()}) \
             if self.authority else None
         #: current claims reused between steps where sound (tm.reach_cache; authority mode; set None
-        #: to decide on fresh claims every step).  Not with a world whose bodies pad the claims
-        #: (SUMO's, ``world.claim_pads``): the cache's own fresh claims are unpadded, so such runs
-        #: decide on the padded claims computed fresh every step.
-        self.claim_cache = ClaimCache(self.reach) \
-            if self.authority and getattr(self.world, "claim_pads", None) is None else None
+        #: to decide on fresh claims every step); with the world's body padding (SUMO's,
+        #: ``world.claim_pads``): a shifted claim only where its pad still covers the one needed now
+        self.claim_cache = ClaimCache(self.reach) if self.authority else None
         sp = settings.speed
         self.groups = {c: _Group(vc, STMPC(self.families[c], cs), decel=_look_ahead_decel(vc),
                                  slack_steps=sp.slack_steps) for c, vc in self.classes.items()}
@@ -556,7 +554,7 @@ class Cosim:
         for c, g in self.groups.items():
             if g.ids:
                 cen, hd, _ = g.centres()
-                parts.append((c, g.ids, g.X, cen, hd, g.l))
+                parts.append((c, g.ids, g.X, cen, hd, g.l, self._group_pads(g)))
         return parts
 
     def _entry_claims(self, ready: list[VehicleSpec], cand: FleetState, with_index: bool = False):

@@ -13,6 +13,10 @@ A cached row is reused at step ``t + 1`` iff every one of these holds (else: fre
 * the vehicle was not granted at ``t`` (a grant gives new claims; they are computed fresh);
 * its waypoint and segment heading are the stored ones (bit-for-bit);
 * its index dropped: ``min(l(t+1), N) <= max(min(l(t), N) - 1, 0)`` (the tube invariant);
+* its footprint padding (``body_pad`` of :func:`~tm.reach.reach_claims`, e.g. SUMO's bodies,
+  :class:`bridge.sumo_body.PadTable`) did not grow: the pad the stored claims were built with is
+  ``>=`` the pad needed now, elementwise (any shape per vehicle): a claim only grows with its pad,
+  so the shifted claims, built with the larger pad, contain the fresh ones with the smaller;
 * its state moved within one step of physics: ``x(t+1)`` (segment frame, both factors) lies in the
   interval hull ``A x(t) ± r_1`` of ``Reach_1(x(t))`` (within ``tol``).  Together with the index this
   is what the inclusion rests on; it also implies ``x(t+1) ∈ S_1(t)`` (no tube escape).
@@ -35,7 +39,7 @@ from tm.reach_book import ReachBook
 __all__ = ["ClaimCache", "CacheStats", "REASONS"]
 
 #: Why a vehicle's cached claims were not reused (keys of :attr:`CacheStats.fresh_by_reason`).
-REASONS = ("new", "stale", "granted", "waypoint", "index", "reach")
+REASONS = ("new", "stale", "granted", "waypoint", "index", "pad", "reach")
 
 
 @dataclass
@@ -63,6 +67,7 @@ class _Entry:
     centre: np.ndarray   # (n, 2)
     heading: np.ndarray  # (n,)
     index: np.ndarray    # (n,) capped at the class's N
+    pad: np.ndarray | None  # (n, ...) the footprint padding the claims were built with (None: none)
     claims: ReachClaims | None = None   # the claims handed out (in force for those not granted)
     granted: np.ndarray | None = None
 
@@ -118,19 +123,26 @@ class ClaimCache:
 
     def _stack(self, parts):
         cls = np.concatenate([np.full(len(p[1]), p[0], dtype=object) for p in parts])
+        with_pad = [len(p) > 6 and p[6] is not None for p in parts]
+        if any(with_pad) and not all(with_pad):
+            raise ValueError("ClaimCache: either every part has a pad (7th item) or none has")
+        pad = np.concatenate([np.asarray(p[6], dtype=float).reshape(len(p[1]), -1) for p in parts]) \
+            if all(with_pad) else None
         X = np.vstack([np.asarray(p[2], dtype=float) for p in parts])
         centre = np.vstack([np.asarray(p[3], dtype=float) for p in parts])
         heading = np.concatenate([np.asarray(p[4], dtype=float) for p in parts])
         index = np.concatenate([np.minimum(np.asarray(p[5], dtype=np.intp), self.book.models[p[0]].N)
                                 for p in parts])
-        return cls, X, centre, heading, index
+        return cls, X, centre, heading, index, pad
 
-    def _offered(self, t, ids, cls, X, centre, heading, index) -> ReachClaims | None:
+    def _offered(self, t, ids, cls, X, centre, heading, index, pad) -> ReachClaims | None:
         o, self._offer = self._offer, None
         if o is None or o.t != t or o.ids != ids:
             return None
         same = (np.array_equal(o.cls, cls) and np.array_equal(o.X, X) and np.array_equal(o.centre, centre)
-                and np.array_equal(o.heading, heading) and np.array_equal(o.index, index))
+                and np.array_equal(o.heading, heading) and np.array_equal(o.index, index)
+                and ((o.pad is None and pad is None) or (o.pad is not None and pad is not None
+                                                         and np.array_equal(o.pad, pad))))
         return o.claims if same else None
 
     def current(self, t: int, parts: Sequence[tuple[str, Sequence[str], np.ndarray, np.ndarray, np.ndarray,
@@ -141,8 +153,10 @@ class ClaimCache:
         ----------
         t : int
             The step (consecutive integers; reuse needs the previous step committed).
-        parts : sequence of (class, ids, X (n, 4), centre (n, 2), heading (n,), index (n,))
-            As :meth:`tm.reach_book.ReachBook.claims`, with the vehicles' ids.
+        parts : sequence of (class, ids, X (n, 4), centre (n, 2), heading (n,), index (n,)[, pad (n, ...)])
+            As :meth:`tm.reach_book.ReachBook.claims`, with the vehicles' ids; ``pad``: the
+            footprint padding (``body_pad`` of :func:`~tm.reach.reach_claims`, passed on as it is),
+            in every part or in none.
 
         Returns
         -------
@@ -151,6 +165,7 @@ class ClaimCache:
         """
         parts = [p for p in parts if len(p[1])]
         for c, pid, *arrays in parts:
+            arrays = [a for a in arrays if a is not None]
             if c not in self.book.models:
                 raise ValueError(f"ClaimCache.current: class {c!r} has no claim model; known: {sorted(self.book.models)}")
             lens = [len(a) for a in arrays]
@@ -163,16 +178,16 @@ class ClaimCache:
             self._pending = None
             self.last_reused = np.zeros(0, dtype=bool)
             return ReachClaims(np.zeros((0, 2)), np.zeros(0), np.zeros((0, K, 2)), np.zeros((0, K, 2)))
-        cls, X, centre, heading, index = self._stack(parts)
+        cls, X, centre, heading, index, pad = self._stack(parts)
         n = len(ids)
-        given = self._offered(t, ids, cls, X, centre, heading, index)
+        given = self._offered(t, ids, cls, X, centre, heading, index, pad)
         if given is not None:
             given.slot_boxes  # noqa: B018  (attached now: the decision and the next shift use them)
             self.last_reused = np.zeros(n, dtype=bool)
             self.stats.offered += n
-            self._pending = _Entry(t, ids, None, cls, X, centre, heading, index, given)
+            self._pending = _Entry(t, ids, None, cls, X, centre, heading, index, pad, given)
             return given
-        reuse, j = self._reusable(t, ids, cls, X, centre, heading, index)
+        reuse, j = self._reusable(t, ids, cls, X, centre, heading, index, pad)
         r = np.flatnonzero(reuse)
         lo, hi, boxes = np.empty((n, self.K, 2)), np.empty((n, self.K, 2)), np.empty((4, n, self.K))
         if len(r):  # slot k <- slot k + 1 of the stored claims, the last one kept (ReachClaims.shift)
@@ -189,7 +204,8 @@ class ClaimCache:
         f = np.flatnonzero(~reuse)
         for c in dict.fromkeys(cls[f].tolist()):
             g = f[cls[f] == c]
-            fresh = pad_slots(reach_claims(self.book.models[c], X[g], centre[g], heading[g], index[g]), self.K)
+            fresh = pad_slots(reach_claims(self.book.models[c], X[g], centre[g], heading[g], index[g],
+                                           body_pad=None if pad is None else pad[g]), self.K)
             lo[g], hi[g] = fresh.lo, fresh.hi
             fb = fresh.slot_boxes
             for q in range(4):  # per plane: a scatter along the middle axis is slow
@@ -198,7 +214,10 @@ class ClaimCache:
         self.stats.reused += len(r)
         self.stats.fresh += len(f)
         out = ReachClaims(centre, heading, lo, hi)._with_boxes(boxes)
-        self._pending = _Entry(t, ids, None, cls, X, centre, heading, index, out)
+        if pad is not None and len(r):  # a shifted row keeps the (larger) pad it was built with
+            pad = pad.copy()
+            pad[r] = self._last.pad[j[r]]
+        self._pending = _Entry(t, ids, None, cls, X, centre, heading, index, pad, out)
         return out
 
     def commit(self, granted: np.ndarray) -> None:
@@ -212,11 +231,11 @@ class ClaimCache:
         granted = np.asarray(granted, dtype=bool)
         if granted.shape != (len(e.ids),):
             raise ValueError(f"ClaimCache.commit: granted must have shape ({len(e.ids)},), got {granted.shape}")
-        self._last = _Entry(e.t, e.ids, e.row, e.cls, e.X, e.centre, e.heading, e.index, e.claims, granted)
+        self._last = _Entry(e.t, e.ids, e.row, e.cls, e.X, e.centre, e.heading, e.index, e.pad, e.claims, granted)
         self._pending = None
 
     # ------------------------------------------------------------------ the premises
-    def _reusable(self, t, ids, cls, X, centre, heading, index) -> tuple[np.ndarray, np.ndarray]:
+    def _reusable(self, t, ids, cls, X, centre, heading, index, pad) -> tuple[np.ndarray, np.ndarray]:
         """Which rows may take their shifted cached claims, and their cached rows (-1: none)."""
         n = len(ids)
         last = self._last
@@ -243,6 +262,12 @@ class ClaimCache:
         mark(last.granted[js], "granted")
         mark(np.any(last.centre[js] != centre, axis=1) | (last.heading[js] != heading), "waypoint")
         mark(index > np.maximum(last.index[js] - 1, 0), "index")
+        if pad is None or last.pad is None:  # claims with a pad never stand for claims without, nor back
+            mark(np.full(n, (pad is None) != (last.pad is None)), "pad")
+        elif pad.shape[1:] != last.pad.shape[1:]:
+            mark(np.ones(n, dtype=bool), "pad")
+        else:
+            mark(~(last.pad[js] >= pad).all(axis=1), "pad")
         ok = fail == 0
         if ok.any():
             mark(~self._within_one_step(cls, X, centre, heading, last.X[js], ok), "reach")

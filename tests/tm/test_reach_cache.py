@@ -349,3 +349,95 @@ def test_offered_claims_are_handed_out_only_for_the_same_state(lcs):
     assert cache.current(5, parts) is not fresh                 # offered for another step
     with pytest.raises(ValueError, match="1 claims for 2 vehicles"):
         cache.offer(6, parts, fresh.take([0]))
+
+
+@hsettings(max_examples=25, deadline=None)
+@given(classes=st.lists(st.sampled_from(URBAN), min_size=1, max_size=4), seed=st.integers(0, 2 ** 31),
+       policy=st.sampled_from(["random", "adversarial"]), p_grow=st.floats(0.0, 0.4),
+       p_switch=st.floats(0.0, 0.3))
+def test_padded_shifted_claims_contain_fresh_padded_ones(lcs, classes, seed, policy, p_grow, p_switch):
+    """Claims with a footprint padding (SUMO's bodies): each vehicle's pad (n, 2) shrinks at random from
+    step to step (a PadTable's padding is non-increasing in the window start) and sometimes grows.
+    At every step the cache's claims contain the fresh claims built with the pad needed now; a row whose
+    pad exceeds the pad its claims in force were built with is never reused (reason ``pad``)."""
+    rng = np.random.default_rng(seed)
+    book = _Book(lcs)
+    cache = ClaimCache(book)
+    n = len(classes)
+    X, C, H, L = [], [], [], []
+    for c in classes:
+        lc = lcs[c]
+        fam = lc.ctl.family
+        l0 = int(rng.integers(0, fam.N + 1))
+        hd = rng.uniform(-np.pi, np.pi, 1)
+        cen = rng.uniform(-200, 200, (1, 2))
+        x = rotate_pairs(fam.sample(l0, 1, rng), hd) + np.hstack([cen, np.zeros((1, 2))])
+        X.append(x[0]), C.append(cen[0]), H.append(hd[0])
+        L.append(int(lc.ctl.index(x, cen, hd)[0]))
+    X, C, H, L = np.array(X), np.array(C), np.array(H), np.array(L)
+    assume(all(L[v] <= lcs[c].ctl.N for v, c in enumerate(classes)))
+    ids = [f"v{v}" for v in range(n)]
+    pad = rng.uniform(0.0, 1.5, (n, 2))
+    built = None  # the pads the claims in force were built with
+    for t in range(25):
+        parts = [(c, [ids[v]], X[[v]], C[[v]], H[[v]], L[[v]], pad[[v]]) for v, c in enumerate(classes)]
+        before = cache.stats.fresh_by_reason["pad"]
+        got = cache.current(t, parts)
+        fresh = ReachClaims.concat(*[pad_slots(reach_claims(book.models[c], X[[v]], C[[v]], H[[v]],
+                                                            np.minimum(L[[v]], book.models[c].N), body_pad=pad[[v]]),
+                                               book.K) for v, c in enumerate(classes)])
+        assert _contains(got, fresh), t
+        if built is not None:
+            grew = (pad > built).any(axis=1)
+            assert not (cache.last_reused & grew).any(), t
+            if grew.any():
+                assert cache.stats.fresh_by_reason["pad"] > before, t
+            built = np.where(cache.last_reused[:, None], built, pad)
+        else:
+            built = pad.copy()
+        granted = np.zeros(n, dtype=bool)
+        for v, c in enumerate(classes):
+            lc = lcs[c]
+            step = lc.vclass.model.delta * np.array([np.cos(H[v]), np.sin(H[v])])
+            l_next = int(lc.ctl.index(X[[v]], C[[v]] + step, H[[v]])[0])
+            if rng.random() < p_switch and l_next <= lc.ctl.N:
+                C[v], L[v], granted[v] = C[v] + step, l_next, True
+        cache.commit(granted)
+        built[granted] = np.inf  # granted: fresh next step (not reused)
+        grew = ~granted & (rng.random(n) < p_grow)
+        pad = np.where(grew[:, None], pad + rng.uniform(1e-6, 0.5, (n, 2)) * (rng.random((n, 2)) < 0.5)
+                       + np.array([[0.0, 1e-6]]), pad * rng.uniform(0.7, 1.0, (n, 2)))
+        for v, c in enumerate(classes):
+            lc = lcs[c]
+            m = lc.vclass.model
+            U = lc.ctl.control(X[[v]], C[[v]], L[[v]], heading=H[[v]])
+            Ur = rotate_pairs(U, -H[[v]])[0]
+            Xr = rotate_pairs(X[[v]] - np.r_[C[v], 0, 0], -H[[v]])[0]
+            d = _disturb(m, Xr, Ur, np.zeros(2), policy, rng, 1.0)
+            X[v] = X[v] @ m.A.T + U[0] @ m.B.T + rotate_pairs(d[None], H[[v]])[0]
+            L[v] = min(int(lc.ctl.index(X[[v]], C[[v]], H[[v]])[0]), lc.ctl.N)
+    assert cache.stats.reused > 0
+
+
+def test_a_grown_pad_gives_fresh_claims(lcs):
+    """Mutation check of the pad premise: the same state with a pad that grew by 0.2 m along is
+    recomputed (reason ``pad``), and the cached claims would not have contained the fresh ones."""
+    lc = lcs["car"]
+    book = _Book({"car": lc})
+    cache = ClaimCache(book)
+    ctl, m = lc.ctl, lc.vclass.model
+    C = np.array([[ctl.authority.s_ma - 6.0, 0.0]])
+    X = np.array([[0.0, 0.0, 10.0, 0.0]])
+    H = np.zeros(1)
+    L = np.minimum(ctl.index(X, C, H), ctl.N)
+    pad = np.array([[0.3, 0.1]])
+    first = cache.current(0, [("car", ["a"], X, C, H, L, pad)])
+    cache.commit(np.zeros(1, bool))
+    U = ctl.control(X, C, L, heading=H)
+    X = X @ m.A.T + U @ m.B.T
+    L = np.minimum(ctl.index(X, C, H), ctl.N)
+    big = pad + [[0.2, 0.0]]
+    got = cache.current(1, [("car", ["a"], X, C, H, L, big)])
+    assert not cache.last_reused[0] and cache.stats.fresh_by_reason["pad"] == 1
+    fresh = pad_slots(reach_claims(book.models["car"], X, C, H, L, body_pad=big), book.K)
+    assert _contains(got, fresh) and not _contains(first.shift(), fresh)
