@@ -1,12 +1,18 @@
 """SUMO's own demo scenarios, unchanged, driven by muvsim and by SUMO's drivers (``--baseline sumo``).
 
 Usage: python benchmarks/bench_scenarios.py [--quick] [--duration S] [--only NAME ...]
+                                            [--controller paper|authority|both]
                                             [--out benchmarks/results/scenarios.csv]
 
 Runs every scenario of ``$SUMO_HOME/tools/game`` that is a road scenario (cross, square, grid6,
-corridor, ramp, fkk_in, A10KW, bs3d, fokr_bs_demo) with no option but ``--duration`` (default
-180 s: the first 180 s of the configuration's window), once per driver, each in its own process
-(libsumo runs one simulation per process), and writes one row per scenario and driver: demand
+corridor, ramp, fkk_in, A10KW, bs3d, fokr_bs_demo) and ``tlsgrid``, a signalised city grid
+generated into the runs directory by SUMO's own tools (:func:`sumo_nets.tls_grid.make_tls_grid`:
+``netgenerate --grid --grid.number 4 --grid.length 150 --default.lanenumber 2 --tls.guess``,
+``randomTrips.py -e 180 -p 2.0 --seed 3 --validate``, a plain .sumocfg), with no option but
+``--duration`` (default 180 s: the first 180 s of the configuration's window), once per driver,
+each in its own process (libsumo runs one simulation per process), and writes one row per
+scenario, driver and controller (``--controller``: muvsim's mode, default paper; ``both``: paper
+and authority rows; SUMO's drivers: ``-``): demand
 in the window, undrivable vehicles, arrivals, mean delay and travel time of the arrived, halts,
 collisions (SUMO's, geometric), invariant violations, the signals mode and red-light
 violations (muvsim's ``--signals``, default obey; ``sumo`` for SUMO's drivers), rtf and wall time, or the run's error.
@@ -25,16 +31,17 @@ from pathlib import Path
 import pandas as pd
 
 GAME = ("cross", "square", "grid6", "corridor", "ramp", "fkk_in", "A10KW", "bs3d", "fokr_bs_demo")
-COLUMNS = ["scenario", "driver", "duration_s", "complete", "demand", "undrivable", "arrived", "mean_delay_s",
+GENERATED = ("tlsgrid",)  # made into the runs directory by sumo_nets.tls_grid
+COLUMNS = ["scenario", "driver", "controller", "duration_s", "complete", "demand", "undrivable", "arrived", "mean_delay_s",
            "mean_travel_time_s", "halt_episodes", "collisions_sumo", "collisions_geometric",
            "invariant_violations", "signals", "red_violations", "rtf", "wall_s", "error"]
 
 
-def _row(name: str, driver: str, duration: float, out: Path, rc: int, stderr: str) -> dict:
+def _row(name: str, driver: str, controller: str, duration: float, out: Path, rc: int, stderr: str) -> dict:
     f = out / "summary.json"
     s = json.loads(f.read_text()) if f.exists() else {}
     demand = s.get("vehicles_total")  # None for SUMO's drivers: the caller fills in muvsim's (the same demand)
-    return {"scenario": name, "driver": driver, "duration_s": duration, "complete": bool(s.get("complete")),
+    return {"scenario": name, "driver": driver, "controller": controller, "duration_s": duration, "complete": bool(s.get("complete")),
             "demand": demand, "undrivable": s.get("vehicles_undrivable"), "arrived": s.get("vehicles_arrived"),
             "mean_delay_s": s.get("mean_delay_s"), "mean_travel_time_s": s.get("mean_travel_time_s"),
             "halt_episodes": s.get("halt_episodes"), "collisions_sumo": s.get("collisions_sumo"),
@@ -51,31 +58,51 @@ def main(argv=None) -> pd.DataFrame:
     ap.add_argument("--quick", action="store_true", help="cross and square, 20 s (used by the tests)")
     ap.add_argument("--duration", type=float, default=None, help="simulated seconds (default 180; quick 20)")
     ap.add_argument("--only", nargs="+", default=None, metavar="NAME", help="only these scenarios")
+    ap.add_argument("--controller", choices=["paper", "authority", "both"], default="paper",
+                    help="muvsim's --controller (default paper, the run's default); both: paper and authority rows")
     ap.add_argument("--out", default="benchmarks/results/scenarios.csv")
     ap.add_argument("--runs", default=None, help="keep the run directories here (default: a temporary one)")
     args = ap.parse_args(argv)
     from sumo_nets.sumo_tools import sumo_home
 
     game = sumo_home() / "tools" / "game"
-    names = args.only or (["cross", "square"] if args.quick else list(GAME))
+    names = args.only or (["cross", "square"] if args.quick else [*GAME, *GENERATED])
+    unknown = sorted(set(names) - set(GAME) - set(GENERATED))
+    if unknown:
+        ap.error(f"--only: unknown scenario(s) {', '.join(unknown)}; valid: {', '.join([*GAME, *GENERATED])}")
     duration = args.duration or (20.0 if args.quick else 180.0)
+    controllers = ["paper", "authority"] if args.controller == "both" else [args.controller]
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         runs = Path(args.runs) if args.runs else Path(tmp)
         for name in names:
-            for driver in ("muvsim", "sumo"):
-                out = runs / f"{name}-{driver}"
-                cmd = [sys.executable, "-m", "bridge.cli", "run", str(game / f"{name}.sumocfg"), "--out", str(out),
+            if name in GENERATED:
+                from sumo_nets.tls_grid import make_tls_grid
+
+                cfg = make_tls_grid(runs / f"{name}-scenario")
+            else:
+                cfg = game / f"{name}.sumocfg"
+            demand = None
+            for driver, controller in [*(("muvsim", c) for c in controllers), ("sumo", "-")]:
+                out = runs / (f"{name}-sumo" if driver == "sumo" else
+                              f"{name}-muvsim" + ("" if controller == "paper" else f"-{controller}"))
+                cmd = [sys.executable, "-m", "bridge.cli", "run", str(cfg), "--out", str(out),
                        "--duration", f"{duration:g}", "--quiet", "--log", "none"]
                 if driver == "sumo":
                     cmd += ["--baseline", "sumo"]
+                elif controller != "paper":  # paper: no option at all, the run's default
+                    cmd += ["--controller", controller]
                 proc = subprocess.run(cmd, capture_output=True, text=True)
-                row = _row(name, driver, duration, out, proc.returncode, proc.stderr)
+                row = _row(name, driver, controller, duration, out, proc.returncode, proc.stderr)
                 if driver == "sumo":
-                    row["demand"] = rows[-1]["demand"] if rows and rows[-1]["scenario"] == name else None
+                    row["demand"] = demand  # muvsim's: the same demand (SUMO's expansion in the window)
+                elif demand is None:
+                    demand = row["demand"]
                 rows.append(row)
-                print(f"{name:<14} {driver:<7} arrived {row['arrived']}/{row['demand']} collisions_sumo "
-                      f"{row['collisions_sumo']} rtf {row['rtf']} {row['error'][:120]}", flush=True)
+                print(f"{name:<14} {driver:<7} {controller:<9} arrived {row['arrived']}/{row['demand']} "
+                      f"collisions_sumo {row['collisions_sumo']} geometric {row['collisions_geometric']} "
+                      f"invariant {row['invariant_violations']} red {row['red_violations']} rtf {row['rtf']} "
+                      f"{row['error'][:120]}", flush=True)
     df = pd.DataFrame(rows, columns=COLUMNS)
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)

@@ -13,7 +13,8 @@ the README table).  Tables:
 * ``scale``: ``benchmarks/results/scale.csv`` (``bench_scale.py``), wall seconds per simulated
   second by component;
 * ``scenarios``: ``benchmarks/results/scenarios.csv`` (``bench_scenarios.py``), one row per SUMO demo
-  scenario, muvsim beside SUMO's drivers on the same demand;
+  scenario (and muvsim controller, when the CSV has authority rows), muvsim beside SUMO's drivers on
+  the same demand;
 * ``tm_reach``: ``benchmarks/results/tm_reach.csv`` (``bench_tm.py``), the traffic manager on
   time-indexed reach claims, per fleet size and variant.
 
@@ -81,29 +82,40 @@ def _pair(a, b, fmt) -> str:
 
 
 def scenarios_table(csv: Path = RESULTS / "scenarios.csv") -> str:
-    """One row per scenario: muvsim's figures beside SUMO's drivers' (the rows of ``driver`` muvsim, sumo)."""
+    """One row per scenario and muvsim controller: muvsim's figures beside SUMO's drivers' (the rows of
+    ``driver`` muvsim, sumo).  ``controller`` paper (or no such column): the row is the scenario's name;
+    another controller (``bench_scenarios.py --controller both``): ``NAME (authority)``, after it."""
     df = pd.read_csv(csv, keep_default_na=True)
+    if "controller" not in df:
+        df["controller"] = "paper"
+    df["controller"] = df["controller"].where(df["driver"] == "muvsim", "-").fillna("paper")
     head = ("| scenario | window (s) | demand | arrived muvsim / SUMO | mean delay muvsim / SUMO (s) "
             "| SUMO collisions muvsim / SUMO | geometric, invariant (muvsim) | undrivable (muvsim) "
             "| signals (muvsim), red crossings | rtf muvsim / SUMO | error |")
     lines = [head, "| " + " | ".join(["---"] * 11) + " |"]
+    g = lambda r, k: r.get(k) if k in r else None  # noqa: E731 - a missing driver or column: "-"
     for name in dict.fromkeys(df["scenario"]):  # the CSV's order
-        rows = df[df["scenario"] == name].set_index("driver")
-        m = rows.loc["muvsim"] if "muvsim" in rows.index else pd.Series(dtype=object)
-        b = rows.loc["sumo"] if "sumo" in rows.index else pd.Series(dtype=object)
-        g = lambda r, k: r.get(k) if k in r else None  # noqa: E731 - a missing driver or column: "-"
-        errors = "; ".join(f"{d}: {str(g(r, 'error'))[:120]}" for d, r in (("muvsim", m), ("sumo", b))
-                           if isinstance(g(r, "error"), str) and g(r, "error").strip())
-        signals = g(m, "signals")
-        signals = signals if isinstance(signals, str) else "-"
-        lines.append(
-            f"| {name} | {_count(g(m, 'duration_s') if g(m, 'duration_s') is not None else g(b, 'duration_s'))} "
-            f"| {_count(g(m, 'demand'))} | {_pair(g(m, 'arrived'), g(b, 'arrived'), _count)} "
-            f"| {_pair(g(m, 'mean_delay_s'), g(b, 'mean_delay_s'), lambda v: _f(v, 1))} "
-            f"| {_pair(g(m, 'collisions_sumo'), g(b, 'collisions_sumo'), _count)} "
-            f"| {_count(g(m, 'collisions_geometric'))}, {_count(g(m, 'invariant_violations'))} "
-            f"| {_count(g(m, 'undrivable'))} | {signals}, {_count(g(m, 'red_violations'))} "
-            f"| {_pair(g(m, 'rtf'), g(b, 'rtf'), lambda v: _f(v, 2))} | {errors or '-'} |")
+        rows = df[df["scenario"] == name]
+        b = rows[rows["driver"] == "sumo"]
+        b = b.iloc[0] if len(b) else pd.Series(dtype=object)
+        mus = rows[rows["driver"] == "muvsim"]
+        ctrls = sorted(dict.fromkeys(mus["controller"]), key=lambda c: c != "paper") or ["paper"]
+        for ctrl in ctrls:
+            m = mus[mus["controller"] == ctrl]
+            m = m.iloc[0] if len(m) else pd.Series(dtype=object)
+            errors = "; ".join(f"{d}: {str(g(r, 'error'))[:120]}" for d, r in (("muvsim", m), ("sumo", b))
+                               if isinstance(g(r, "error"), str) and g(r, "error").strip())
+            signals = g(m, "signals")
+            signals = signals if isinstance(signals, str) else "-"
+            label = name if ctrl == "paper" else f"{name} ({ctrl})"
+            lines.append(
+                f"| {label} | {_count(g(m, 'duration_s') if g(m, 'duration_s') is not None else g(b, 'duration_s'))} "
+                f"| {_count(g(m, 'demand'))} | {_pair(g(m, 'arrived'), g(b, 'arrived'), _count)} "
+                f"| {_pair(g(m, 'mean_delay_s'), g(b, 'mean_delay_s'), lambda v: _f(v, 1))} "
+                f"| {_pair(g(m, 'collisions_sumo'), g(b, 'collisions_sumo'), _count)} "
+                f"| {_count(g(m, 'collisions_geometric'))}, {_count(g(m, 'invariant_violations'))} "
+                f"| {_count(g(m, 'undrivable'))} | {signals}, {_count(g(m, 'red_violations'))} "
+                f"| {_pair(g(m, 'rtf'), g(b, 'rtf'), lambda v: _f(v, 2))} | {errors or '-'} |")
     return "\n".join(lines)
 
 

@@ -70,3 +70,19 @@ def test_a_scenario_with_only_one_driver_renders_dashes_not_a_crash(tmp_path):
                    "mean_delay_s": float("nan"), "collisions_sumo": 0, "rtf": 1.5, "error": ""}]).to_csv(csv, index=False)
     row = m.scenarios_table(csv).splitlines()[2]
     assert row.startswith("| cross | 20 | 9 | 2 / - | - / - | 0 / - |") and row.endswith("| 1.50 / - | - |")
+
+
+def test_authority_rows_render_after_the_paper_row_beside_the_same_sumo_figures(tmp_path):
+    """bench_scenarios.py --controller both: a scenario's paper row keeps its name, the authority
+    row follows as ``NAME (authority)``, both beside the one SUMO row."""
+    m = _mod()
+    csv = tmp_path / "scenarios.csv"
+    base = {"scenario": "tlsgrid", "duration_s": 180.0, "demand": 90, "collisions_sumo": 0, "error": ""}
+    pd.DataFrame([{**base, "driver": "muvsim", "controller": "authority", "arrived": 7, "rtf": 0.5},
+                  {**base, "driver": "muvsim", "controller": "paper", "arrived": 5, "rtf": 1.0},
+                  {**base, "driver": "sumo", "controller": "-", "arrived": 45, "rtf": 300.0}]).to_csv(csv, index=False)
+    rows = m.scenarios_table(csv).splitlines()[2:]
+    cells = [[c.strip() for c in r.strip("|").split("|")] for r in rows]
+    assert [c[0] for c in cells] == ["tlsgrid", "tlsgrid (authority)"]
+    assert cells[0][3] == "5 / 45" and cells[1][3] == "7 / 45"
+    assert cells[0][9] == "1.00 / 300.00" and cells[1][9] == "0.50 / 300.00"

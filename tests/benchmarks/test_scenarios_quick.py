@@ -19,6 +19,8 @@ def test_scenarios_benchmark_quick_mode_writes_its_table(tmp_path):
     assert sorted(zip(df["scenario"], df["driver"])) == [("cross", "muvsim"), ("cross", "sumo"),
                                                          ("square", "muvsim"), ("square", "sumo")]
     assert df["complete"].all() and (df["collisions_sumo"] == 0).all()
+    # the default is muvsim's default controller (paper); SUMO's drivers have none
+    assert set(zip(df["driver"], df["controller"])) == {("muvsim", "paper"), ("sumo", "-")}
     m = df[df["driver"] == "muvsim"].set_index("scenario")
     assert (m["demand"] > 0).all() and (m["invariant_violations"] == 0).all()
     # lights obeyed by default, and the run's red-light counter recorded (cross is signalised)
@@ -29,3 +31,10 @@ def test_scenarios_benchmark_quick_mode_writes_its_table(tmp_path):
     import json
     s = json.loads((tmp_path / "r" / "square-muvsim" / "summary.json").read_text())
     assert m.loc["square", "demand"] == s["vehicles_total"] and m.loc["square", "rtf"] == s["rtf"]
+
+
+def test_an_unknown_scenario_is_refused_by_name(tmp_path):
+    proc = subprocess.run([sys.executable, str(SCRIPT), "--only", "nosuch", "--out", str(tmp_path / "x.csv")],
+                          capture_output=True, text=True, timeout=60, cwd=ROOT)
+    assert proc.returncode == 2 and "unknown scenario(s) nosuch" in proc.stderr and "tlsgrid" in proc.stderr
+    assert not (tmp_path / "x.csv").exists()
