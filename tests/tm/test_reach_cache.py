@@ -41,6 +41,51 @@ class _Book:
 
 
 
+def _random_fleet(lcs, classes, rng):
+    """One vehicle per entry of ``classes``: a random state of a random level of its family, at a
+    random waypoint and heading; returns ``X (n, 4), C (n, 2), H (n,), L (n,)`` (L: its index)."""
+    X, C, H, L = [], [], [], []
+    for c in classes:
+        lc = lcs[c]
+        fam = lc.ctl.family
+        l0 = int(rng.integers(0, fam.N + 1))
+        hd = rng.uniform(-np.pi, np.pi, 1)
+        cen = rng.uniform(-200, 200, (1, 2))
+        x = rotate_pairs(fam.sample(l0, 1, rng), hd) + np.hstack([cen, np.zeros((1, 2))])
+        X.append(x[0]), C.append(cen[0]), H.append(hd[0])
+        L.append(int(lc.ctl.index(x, cen, hd)[0]))
+    return np.array(X), np.array(C), np.array(H), np.array(L)
+
+
+def _switch_at_random(lcs, classes, X, C, H, L, rng, p_switch) -> np.ndarray:
+    """Each vehicle switches (granted) to the waypoint ``delta`` ahead with probability ``p_switch``
+    where its state is inside that waypoint's sets; ``C`` and ``L`` updated in place; the granted mask."""
+    granted = np.zeros(len(classes), dtype=bool)
+    for v, c in enumerate(classes):
+        lc = lcs[c]
+        step = lc.vclass.model.delta * np.array([np.cos(H[v]), np.sin(H[v])])
+        l_next = int(lc.ctl.index(X[[v]], C[[v]] + step, H[[v]])[0])
+        if rng.random() < p_switch and l_next <= lc.ctl.N:
+            C[v], L[v], granted[v] = C[v] + step, l_next, True
+    return granted
+
+
+def _step_fleet(lcs, classes, X, C, H, L, rng, policy, sign, kicked=None) -> None:
+    """One step of every vehicle under its ST-MPC and ``policy``'s disturbance (``X``, ``L`` in
+    place); vehicle ``kicked`` (if any) gets 0.5 m/s more along, outside D: the premise fails."""
+    for v, c in enumerate(classes):
+        lc = lcs[c]
+        m = lc.vclass.model
+        U = lc.ctl.control(X[[v]], C[[v]], L[[v]], heading=H[[v]])
+        Ur = rotate_pairs(U, -H[[v]])[0]
+        Xr = rotate_pairs(X[[v]] - np.r_[C[v], 0, 0], -H[[v]])[0]
+        d = _disturb(m, Xr, Ur, np.zeros(2), policy, rng, sign)
+        if v == kicked:
+            d = d + np.array([0.0, 0.0, 0.5, 0.0])
+        X[v] = X[v] @ m.A.T + U[0] @ m.B.T + rotate_pairs(d[None], H[[v]])[0]
+        L[v] = min(int(lc.ctl.index(X[[v]], C[[v]], H[[v]])[0]), lc.ctl.N)
+
+
 def _contains(outer: ReachClaims, inner: ReachClaims) -> bool:
     """Every non-empty box of ``inner`` inside the same slot of ``outer`` (within GEOMETRY_TOL)."""
     full = (inner.lo <= inner.hi).all(axis=-1)
@@ -63,17 +108,7 @@ def test_shifted_claims_contain_fresh_ones(lcs, classes, seed, policy, sign, p_s
     book = _Book(lcs)
     cache = ClaimCache(book)
     n = len(classes)
-    X, C, H, L = [], [], [], []
-    for c in classes:
-        lc = lcs[c]
-        fam = lc.ctl.family
-        l0 = int(rng.integers(0, fam.N + 1))
-        hd = rng.uniform(-np.pi, np.pi, 1)
-        cen = rng.uniform(-200, 200, (1, 2))
-        x = rotate_pairs(fam.sample(l0, 1, rng), hd) + np.hstack([cen, np.zeros((1, 2))])
-        X.append(x[0]), C.append(cen[0]), H.append(hd[0])
-        L.append(int(lc.ctl.index(x, cen, hd)[0]))
-    X, C, H, L = np.array(X), np.array(C), np.array(H), np.array(L)
+    X, C, H, L = _random_fleet(lcs, classes, rng)
     assume(all(L[v] <= lcs[c].ctl.N for v, c in enumerate(classes)))
     ids = [f"v{v}" for v in range(n)]
     length = np.array([lcs[c].vclass.length for c in classes])
@@ -90,28 +125,12 @@ def test_shifted_claims_contain_fresh_ones(lcs, classes, seed, policy, sign, p_s
         if t == kick + 1:
             assert not cache.last_reused[0]
         assert np.array_equal(got.slot_boxes, slot_aabb(got.centre, got.heading, got.lo, got.hi))
-        granted = np.zeros(n, dtype=bool)
-        for v, c in enumerate(classes):
-            lc = lcs[c]
-            step = lc.vclass.model.delta * np.array([np.cos(H[v]), np.sin(H[v])])
-            l_next = int(lc.ctl.index(X[[v]], C[[v]] + step, H[[v]])[0])
-            if rng.random() < p_switch and l_next <= lc.ctl.N:
-                C[v], L[v], granted[v] = C[v] + step, l_next, True
+        granted = _switch_at_random(lcs, classes, X, C, H, L, rng, p_switch)
         inforce = got if not granted.any() else ReachClaims.concat(*[
             book.fresh([parts[v][:3] + (C[[v]], H[[v]], L[[v]])]) if granted[v] else got.take([v])
             for v in range(n)])
         cache.commit(granted)
-        for v, c in enumerate(classes):
-            lc = lcs[c]
-            m = lc.vclass.model
-            U = lc.ctl.control(X[[v]], C[[v]], L[[v]], heading=H[[v]])
-            Ur = rotate_pairs(U, -H[[v]])[0]
-            Xr = rotate_pairs(X[[v]] - np.r_[C[v], 0, 0], -H[[v]])[0]
-            d = _disturb(m, Xr, Ur, np.zeros(2), policy, rng, sign)
-            if t == kick and v == 0:
-                d = d + np.array([0.0, 0.0, 0.5, 0.0])  # outside D: the premise fails
-            X[v] = X[v] @ m.A.T + U[0] @ m.B.T + rotate_pairs(d[None], H[[v]])[0]
-            L[v] = min(int(lc.ctl.index(X[[v]], C[[v]], H[[v]])[0]), lc.ctl.N)
+        _step_fleet(lcs, classes, X, C, H, L, rng, policy, sign, kicked=0 if t == kick else None)
     assert cache.stats.reused > 0
 
 
@@ -364,17 +383,7 @@ def test_padded_shifted_claims_contain_fresh_padded_ones(lcs, classes, seed, pol
     book = _Book(lcs)
     cache = ClaimCache(book)
     n = len(classes)
-    X, C, H, L = [], [], [], []
-    for c in classes:
-        lc = lcs[c]
-        fam = lc.ctl.family
-        l0 = int(rng.integers(0, fam.N + 1))
-        hd = rng.uniform(-np.pi, np.pi, 1)
-        cen = rng.uniform(-200, 200, (1, 2))
-        x = rotate_pairs(fam.sample(l0, 1, rng), hd) + np.hstack([cen, np.zeros((1, 2))])
-        X.append(x[0]), C.append(cen[0]), H.append(hd[0])
-        L.append(int(lc.ctl.index(x, cen, hd)[0]))
-    X, C, H, L = np.array(X), np.array(C), np.array(H), np.array(L)
+    X, C, H, L = _random_fleet(lcs, classes, rng)
     assume(all(L[v] <= lcs[c].ctl.N for v, c in enumerate(classes)))
     ids = [f"v{v}" for v in range(n)]
     pad = rng.uniform(0.0, 1.5, (n, 2))
@@ -395,27 +404,13 @@ def test_padded_shifted_claims_contain_fresh_padded_ones(lcs, classes, seed, pol
             built = np.where(cache.last_reused[:, None], built, pad)
         else:
             built = pad.copy()
-        granted = np.zeros(n, dtype=bool)
-        for v, c in enumerate(classes):
-            lc = lcs[c]
-            step = lc.vclass.model.delta * np.array([np.cos(H[v]), np.sin(H[v])])
-            l_next = int(lc.ctl.index(X[[v]], C[[v]] + step, H[[v]])[0])
-            if rng.random() < p_switch and l_next <= lc.ctl.N:
-                C[v], L[v], granted[v] = C[v] + step, l_next, True
+        granted = _switch_at_random(lcs, classes, X, C, H, L, rng, p_switch)
         cache.commit(granted)
         built[granted] = np.inf  # granted: fresh next step (not reused)
         grew = ~granted & (rng.random(n) < p_grow)
         pad = np.where(grew[:, None], pad + rng.uniform(1e-6, 0.5, (n, 2)) * (rng.random((n, 2)) < 0.5)
                        + np.array([[0.0, 1e-6]]), pad * rng.uniform(0.7, 1.0, (n, 2)))
-        for v, c in enumerate(classes):
-            lc = lcs[c]
-            m = lc.vclass.model
-            U = lc.ctl.control(X[[v]], C[[v]], L[[v]], heading=H[[v]])
-            Ur = rotate_pairs(U, -H[[v]])[0]
-            Xr = rotate_pairs(X[[v]] - np.r_[C[v], 0, 0], -H[[v]])[0]
-            d = _disturb(m, Xr, Ur, np.zeros(2), policy, rng, 1.0)
-            X[v] = X[v] @ m.A.T + U[0] @ m.B.T + rotate_pairs(d[None], H[[v]])[0]
-            L[v] = min(int(lc.ctl.index(X[[v]], C[[v]], H[[v]])[0]), lc.ctl.N)
+        _step_fleet(lcs, classes, X, C, H, L, rng, policy, 1.0)
     assert cache.stats.reused > 0
 
 
