@@ -72,7 +72,9 @@ def _switch_at_random(lcs, classes, X, C, H, L, rng, p_switch) -> np.ndarray:
 
 def _step_fleet(lcs, classes, X, C, H, L, rng, policy, sign, kicked=None) -> None:
     """One step of every vehicle under its ST-MPC and ``policy``'s disturbance (``X``, ``L`` in
-    place); vehicle ``kicked`` (if any) gets 0.5 m/s more along, outside D: the premise fails."""
+    place); vehicle ``kicked`` (if any) gets 0.5 m/s more along than the whole one-step reach
+    (inputs and D) can change its speed, ``2 r_1 + 0.5``: outside ``A x ± r_1``, the premise fails
+    (a kick of 0.5 m/s alone can be cancelled by a braking input and land inside it)."""
     for v, c in enumerate(classes):
         lc = lcs[c]
         m = lc.vclass.model
@@ -81,7 +83,7 @@ def _step_fleet(lcs, classes, X, C, H, L, rng, policy, sign, kicked=None) -> Non
         Xr = rotate_pairs(X[[v]] - np.r_[C[v], 0, 0], -H[[v]])[0]
         d = _disturb(m, Xr, Ur, np.zeros(2), policy, rng, sign)
         if v == kicked:
-            d = d + np.array([0.0, 0.0, 0.5, 0.0])
+            d = d + np.array([0.0, 0.0, 2.0 * lc.reach.r_al[1, 1] + 0.5, 0.0])
         X[v] = X[v] @ m.A.T + U[0] @ m.B.T + rotate_pairs(d[None], H[[v]])[0]
         L[v] = min(int(lc.ctl.index(X[[v]], C[[v]], H[[v]])[0]), lc.ctl.N)
 
