@@ -123,9 +123,10 @@ class SumoWorld:
         return t.pads(0, t.arc_k[0] - BACK_M)
 
     def claim_pads(self, ids, k) -> np.ndarray | None:
-        """The claims' padding (n, 4), one-sided (:meth:`bridge.sumo_body.PadTable.pads`), of vehicles ``ids`` for their waypoints ``k`` (n,), for the
-        positions still ahead of them (from the furthest reference point reached, less
-        :data:`~bridge.sumo_body.BACK_M`); None without the network's geometry."""
+        """The claims' padding (n, 4), one-sided (:meth:`bridge.sumo_body.PadTable.pads`), of vehicles
+        ``ids`` for their waypoints ``k`` (n,), for the positions still ahead of them (from the
+        furthest reference point reached, less :data:`~bridge.sumo_body.BACK_M`); None without the
+        network's geometry."""
         if self.net is None:
             return None
         out = np.zeros((len(ids), 4))
