@@ -275,14 +275,17 @@ class PadTable:
             # where the body jumps (the front's lane changes under a lateral offset, a polyline
             # vertex turns the offset's normal) a position between two samples has the body of one
             # side or the other: only the smooth part of the change needs room, at most
-            # (1 + e_max kappa)(1 + W / |F - B|) per metre (corners of a box on a moving axis)
+            # (1 + e_max kappa)(1 + W / |F - B|) per metre (corners of a box on a moving axis), times
+            # how much faster than the front the back can move (lanes of different factors)
             d = np.diff(body.poly, axis=0)
             seg = np.hypot(d[:, 0], d[:, 1])
             turn = np.abs(np.angle(np.exp(1j * np.diff(np.arctan2(d[:, 1], d[:, 0])))))
             kappa = float((turn / np.maximum(np.minimum(seg[:-1], seg[1:]), SAMPLE_M)).max(initial=0.0))
             axis = 0.5 * (self.rel[:, 1, 0] + self.rel[:, 1, 1] - self.rel[:, 1, 2] - self.rel[:, 1, 3])
             chord = np.hypot(axis[:, 0], axis[:, 1]).min()  # shortest front-back distance (e = 0)
-            lip = (1.0 + e_max * kappa) * (1.0 + self.width / max(float(chord), 1e-6)) * SAMPLE_M
+            # the back moves up to (largest / smallest lane factor) times as far as the front
+            ratio = float(body.scale.max() / body.scale.min())
+            lip = ratio * (1.0 + e_max * kappa) * (1.0 + self.width / max(float(chord), 1e-6)) * SAMPLE_M
             dd = np.minimum(dd, lip)
             self.step[:-1] = np.maximum(self.step[:-1], dd)
             self.step[1:] = np.maximum(self.step[1:], dd)

@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings, strategies as st
 
 from bridge.cosim import VehicleSpec
 from bridge.demand import PlannedVehicle
@@ -168,3 +169,41 @@ def test_padding_covers_the_longer_body(net):
     arc_b0 = b.parc[np.flatnonzero(b.seg_lane == kb)[0]]
     k = int(np.argmin(np.abs(arc - (arc_b0 + 50.0))))
     assert table.pads(k, arc[k] - 10.0)[0] >= CAR[0] * (_factor(net) - 1.0) - 1e-9
+
+
+@settings(max_examples=100, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(st.floats(-12.0, 12.0), st.floats(-1.0, 1.0), st.sampled_from([CAR, (12.0, 2.5)]))
+def test_padding_covers_the_body_across_a_change_of_scale(net, ds, lat, size):
+    """Reference points up to 12 m either side of where the front passes from b_0 (factor 1.43)
+    onto c_0 (factor 1): while the front is on c_0 the back, on b_0, moves 1.43 m per metre of the
+    front, so between two samples the body changes by more than the sample spacing.  Every such
+    position has SUMO's body inside the rectangle ``L x W`` widened by the waypoint's padding
+    (car and bus sizes).  Tolerance 1e-9 m (round-off)."""
+    from bridge.groups import _headings
+
+    r = _route(net)
+    b = RouteBody(r, net, *size)
+    W, arc = r.waypoints, r.arc_length
+    box_lo, box_hi = (-40.0, -0.5), (1.2, 0.5)
+    table = b.pad_table(arc, W, _headings(W), box_lo, box_hi)
+    kc = b.lanes.index("c_0")
+    s_c = b.parc[np.flatnonzero(b.seg_lane == kc)[0]]  # route arc where c_0 starts
+    sigma = s_c - 0.5 * size[0] + ds  # the front at s_c + ds
+    k = int(np.searchsorted(arc, sigma + 0.6))  # the first waypoint ahead: its claims hold sigma
+    s_, e_ = np.array([sigma]), np.array([lat * box_hi[1]])
+    _, _, _, corners = b.bodies(s_, e_)
+    q, t, _ = _at(b.poly, b.parc, s_)
+    p = q[0] + e_[0] * np.array([-t[0, 1], t[0, 0]])
+    H = _headings(W)
+    c, s = np.cos(H[k]), np.sin(H[k])
+    d = p - W[k]
+    a, y = c * d[0] + s * d[1], -s * d[0] + c * d[1]
+    assert box_lo[0] <= a <= box_hi[0] and box_lo[1] <= y <= box_hi[1]
+    pad = table.pads(k, sigma - 5.0)  # back, front, right, left
+    rel = corners[0] - p
+    ra = c * rel[:, 0] + s * rel[:, 1]
+    ry = -s * rel[:, 0] + c * rel[:, 1]
+    assert np.all(-ra <= size[0] / 2 + pad[0] + 1e-9)
+    assert np.all(ra <= size[0] / 2 + pad[1] + 1e-9)
+    assert np.all(-ry <= size[1] / 2 + pad[2] + 1e-9)
+    assert np.all(ry <= size[1] / 2 + pad[3] + 1e-9)
