@@ -72,8 +72,11 @@ def _factor(net, lane="b_0"):
 
 def test_the_net_scales_lane_b(net):
     """The premise: SUMO's length of b_0 is 70, its shape about 100 m (tolerance 1 m: netconvert
-    trims the shape at the junctions)."""
+    trims the shape at the junctions); a_0's length is its shape's (to the net file's 0.01 m)."""
     assert net.sumolib_net.getLane("b_0").getLength() == pytest.approx(LENGTH_B)
+    assert net.lane_length("b_0") == pytest.approx(LENGTH_B)
+    # an ordinary edge: length and shape agree to the net file's 0.01 m rounding
+    assert _factor(net, "a_0") == pytest.approx(1.0, abs=0.01 / net.lane_length("a_0"))
     assert _factor(net) * LENGTH_B == pytest.approx(SHAPE_B, abs=1.0)
 
 
