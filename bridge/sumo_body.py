@@ -21,7 +21,13 @@ What this module does instead, for a plant position ``p`` (the body's reference 
   position, lateral offset included, on a lane of the route; measured: to round-off) and the
   lane the front is on as the mapping hint;
 * back ``B``: SUMO's, computed as SUMO does from the front's lane, lane position and lateral
-  offset (:meth:`RouteBody.bodies`).
+  offset (:meth:`RouteBody.bodies`), in SUMO's lane units: a lane position is the shape's arc
+  divided by the lane's length-geometry factor (shape length over the net file's ``length``), so
+  on a lane whose length is not its shape's the body covers ``length * factor`` metres of road.
+  Measured (``grid6``, authority, 180 s, before this was done): ``gneE34_0`` and ``gneE40_0``
+  (111.57 m of shape, length 80, factor 1.39) got two SUMO lane collisions (gap -0.13 m and
+  -0.00 m in lane units) between cars whose muvsim bodies, 5 m of shape long instead of
+  6.97 m, were about 2 m apart; the monitor judged those bodies and saw none.
 
 On a straight lane the body is exactly the rectangle of ``L x W`` centred on ``p`` along the lane.
 Elsewhere it differs; :class:`PadTable` bounds how far SUMO's body reaches beyond that rectangle
@@ -53,6 +59,10 @@ OFFSET_MAX_M = 1.5
 #: How far a vehicle's reference point may roll back along its route (below the furthest it
 #: reached) for the padding to hold (m); counted otherwise (``body_window_exits``).
 BACK_M = 0.5
+
+
+#: SUMO's POSITION_EPS (m): the least shape length MSLane's length-geometry factor takes.
+_POSITION_EPS = 0.1
 
 
 def _arc(points: np.ndarray) -> np.ndarray:
@@ -128,7 +138,17 @@ class RouteBody:
             self.seg_lane[s] = k
         self.shapes = [np.asarray(net.lane_shape(lane), dtype=float) for lane in order]
         self.arcs = [_arc(s) for s in self.shapes]
-        self.lane_len = np.array([a[-1] for a in self.arcs])
+        # SUMO counts lane positions in the net file's lane length, not the shape's: a lane
+        # position ``pos`` lies at the shape's arc ``pos * scale`` (MSLane's length-geometry factor,
+        # shape length (at least POSITION_EPS) over length).  netconvert gives every lane of an edge
+        # the edge's length, so on a curved or re-shaped edge the factor is not 1 (grid6's gneE34_0:
+        # 111.57 m of shape, length 80, factor 1.39): there SUMO's body, ``length`` lane units from
+        # its front, covers ``length * scale`` metres of road.
+        self.lane_len = np.array([float(net.lane_length(lane)) for lane in order])
+        if np.any(self.lane_len <= 0):
+            bad = [lane for lane, ln in zip(order, self.lane_len) if ln <= 0]
+            raise ValueError(f"RouteBody: lane(s) {bad} have a non-positive length in the network")
+        self.scale = np.array([max(a[-1], _POSITION_EPS) for a in self.arcs]) / self.lane_len
         self.edge = [lane.rsplit("_", 1)[0] for lane in order]
         self.index = [int(lane.rsplit("_", 1)[1]) for lane in order]
         # the lane SUMO continues the back on behind lane k: the last earlier lane of another edge
@@ -176,7 +196,7 @@ class RouteBody:
         for k in np.unique(lane):
             rows = np.flatnonzero(lane == k)
             s, lat = _project(self.shapes[k], self.arcs[k], front[rows])
-            rem = s - L  # lane position of the back on lane k (negative: on the lanes behind)
+            rem = s / self.scale[k] - L  # SUMO's lane position of the back (negative: on the lanes behind)
             cur = np.full(len(rows), k)
             for _ in range(8):
                 short = rem < 0
@@ -188,7 +208,7 @@ class RouteBody:
                 rem = np.where(go, rem + self.lane_len[cur], rem)
             for c in np.unique(cur):
                 sel = cur == c
-                pt, tt, _ = _at(self.shapes[c], self.arcs[c], rem[sel])
+                pt, tt, _ = _at(self.shapes[c], self.arcs[c], rem[sel] * self.scale[c])
                 back[rows[sel]] = pt + lat[sel, None] * np.column_stack([-tt[:, 1], tt[:, 0]])
         axis = front - back
         n = np.hypot(axis[:, 0], axis[:, 1])
@@ -255,14 +275,17 @@ class PadTable:
             # where the body jumps (the front's lane changes under a lateral offset, a polyline
             # vertex turns the offset's normal) a position between two samples has the body of one
             # side or the other: only the smooth part of the change needs room, at most
-            # (1 + e_max kappa)(1 + W / |F - B|) per metre (corners of a box on a moving axis)
+            # (1 + e_max kappa)(1 + W / |F - B|) per metre (corners of a box on a moving axis), times
+            # how much faster than the front the back can move (lanes of different factors)
             d = np.diff(body.poly, axis=0)
             seg = np.hypot(d[:, 0], d[:, 1])
             turn = np.abs(np.angle(np.exp(1j * np.diff(np.arctan2(d[:, 1], d[:, 0])))))
             kappa = float((turn / np.maximum(np.minimum(seg[:-1], seg[1:]), SAMPLE_M)).max(initial=0.0))
             axis = 0.5 * (self.rel[:, 1, 0] + self.rel[:, 1, 1] - self.rel[:, 1, 2] - self.rel[:, 1, 3])
             chord = np.hypot(axis[:, 0], axis[:, 1]).min()  # shortest front-back distance (e = 0)
-            lip = (1.0 + e_max * kappa) * (1.0 + self.width / max(float(chord), 1e-6)) * SAMPLE_M
+            # the back moves up to (largest / smallest lane factor) times as far as the front
+            ratio = float(body.scale.max() / body.scale.min())
+            lip = ratio * (1.0 + e_max * kappa) * (1.0 + self.width / max(float(chord), 1e-6)) * SAMPLE_M
             dd = np.minimum(dd, lip)
             self.step[:-1] = np.maximum(self.step[:-1], dd)
             self.step[1:] = np.maximum(self.step[1:], dd)

@@ -465,6 +465,12 @@ class NetGeometry:
             self._shapes[lane_id] = shp
         return shp
 
+    def lane_length(self, lane_id: str) -> float:
+        """A lane's length as SUMO counts lane positions (m): the ``length`` of the net file, which
+        may differ from its shape's length (netconvert gives every lane of an edge the edge's
+        length; SUMO maps a lane position ``pos`` to the shape's arc ``pos * shape / length``)."""
+        return float(self._net.getLane(lane_id).getLength())
+
     @property
     def sumolib_net(self):
         """The ``sumolib`` network (read with internal lanes), for queries this class does not wrap."""
