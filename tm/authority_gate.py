@@ -187,6 +187,20 @@ class AuthorityGate(JunctionGate):
         found = self._spans[vid] = (z[starts], i[starts], np.where(exits, last + 1, len(W) - 1), exits)
         return found
 
+    def stop_limit(self, fleet: JunctionFleet, row: int) -> int:
+        """The furthest waypoint row ``row``'s stop point may reach without a zone token it does not
+        hold: one before the first entry beyond its requested stop point ``k + 1`` of an interval
+        whose token it does not hold (or gave back), else the route's last waypoint."""
+        zs, e, _, _ = self.intervals(fleet, row)
+        W, _, k = fleet.route(row)
+        vid = fleet.ids[row]
+        back = self.given_back.get(vid, ())
+        limit = len(W) - 1
+        for z, en in zip(zs.tolist(), e.tolist()):
+            if en > k + 1 and (vid not in self.holders[z] or z in back):
+                limit = min(limit, en - 1)
+        return limit
+
     def _span_of(self, fleet: JunctionFleet, row: int, z: int, target: int):
         """``(entry, exit, exits)`` of zone ``z``'s interval holding waypoint ``target``, or None."""
         zs, e, x, ex = self.intervals(fleet, row)
