@@ -108,6 +108,11 @@ class AuthorityReach:
         """World half extents (n, 2) of the hold box ``T^0 ⊕ footprint`` at the headings."""
         return _world_half(self.hold + 0.5 * self.length, self.hold_y + 0.5 * self.width, *headings)
 
+    def claim_half(self, *headings: np.ndarray) -> np.ndarray:
+        """World half extents (n, 2) of what a claim with its stop point at a waypoint covers there:
+        ``T^0`` along plus ``L/2``, the claims' across half-width plus ``W/2`` across."""
+        return _world_half(self.hold + 0.5 * self.length, self.across + 0.5 * self.width, *headings)
+
     def half_extent(self, *headings: np.ndarray) -> np.ndarray:
         """World half extents (n, 2) of a corridor box around a waypoint at the headings: the hold
         box ``T^0 ⊕ footprint`` of every stop point within ``δ/2`` of it (module notes)."""

@@ -23,16 +23,20 @@ The rule, like a junction entry (:mod:`tm.authority_gate`):
   - **room at the exit**: no other vehicle's standing box (the last slot of its claim, ``T^0`` at
     its stop point ⊕ footprint, where it stays if denied from now on) meets the hold box at
     ``x``;
-  - **no pedestrian can reach ``G`` before the vehicle has cleared it**: every pedestrian is
-    farther from ``G`` than ``reach(H) + jump_m`` with ``H = (x - e) + N + hold_steps``.
+  - **no pedestrian can reach the run before the vehicle has cleared it**: every pedestrian is
+    farther than ``reach(H) + jump_m`` with ``H = (x - e) + N + hold_steps`` from ``G`` and from
+    every walking region of the pedestrian rule (walking areas too) that the run's claim boxes
+    meet (:meth:`tm.authority_gate.AuthorityReach.claim_half` at the waypoints ``e .. x``: a
+    walking area beside the crossing that the claims' across half-width reaches).
 
 Why ``H``: after entry the stop point moves one waypoint per grant, ``x - e`` grants until it
 is past the run, and the pedestrian rule checks each of those requests over the slots
 ``k <= max(l, 1) + hold_steps <= N + hold_steps`` (``l <= N``): at step ``t + j`` a pedestrian
-withholds only if it can reach ``G`` within ``N + hold_steps`` steps from where it is then, which is
+withholds only if it can reach a walking region those claims meet (inside the run: ``G`` and the
+walking regions beside it, above) within ``N + hold_steps`` steps from where it is then, which is
 within ``v j Ts + jump_m`` of where it is now (the speed bound over ``j`` steps plus the one jump
 allowance of a SUMO position, measured in tests/bridge/test_pedestrians.py), so from now within
-``reach(N + hold_steps + j) + jump_m``.  A pedestrian farther than that from ``G`` therefore
+``reach(N + hold_steps + j) + jump_m``.  A pedestrian farther than that from those regions therefore
 cannot withhold any request of the passage; once the stop point is past the run the vehicle rests,
 if denied, with its footprint off every crossing.
 
@@ -40,7 +44,8 @@ What it covers and what not: with the entry granted, the pedestrians present can
 vehicle on the crossing, and a vehicle standing past the exit cannot either.  The traffic manager
 may still deny a passage request for another vehicle's claims (a vehicle entering the exit road
 from elsewhere), and a person appearing within ``reach(H)`` during the passage may still withhold
-it: then the vehicle can stop on the crossing, as before.  Safety is untouched: the rule only ever
+it: then the vehicle can stop on the crossing, as before; so may a pedestrian near a walking
+region that only the passage claims' part behind the entry meets (not counted above).  Safety is untouched: the rule only ever
 withholds requests (every grant is still checked by the pedestrian rule and the traffic manager).
 
 Pure numpy, no simulator.
@@ -63,6 +68,15 @@ __all__ = ["CrossingGate"]
 def _box_corners(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     """CCW corners (n, 4, 2) of axis-aligned boxes ``lo, hi (n, 2)``."""
     return np.stack([lo, np.column_stack([hi[:, 0], lo[:, 1]]), hi, np.column_stack([lo[:, 0], hi[:, 1]])], axis=1)
+
+
+def _pad_to(P: np.ndarray, k: int) -> np.ndarray:
+    """Padded polygons ``P (m, j, 2)``, ``j <= k``, with ``k`` vertices each (last vertex repeated)."""
+    if P.shape[1] == k:
+        return P
+    if not len(P):
+        return np.zeros((0, k, 2))
+    return np.concatenate([P, np.repeat(P[:, -1:], k - P.shape[1], axis=1)], axis=1)
 
 
 class CrossingGate:
@@ -213,7 +227,25 @@ class CrossingGate:
             return True
         steps = (x - e) + self.horizon[vclass]
         reach = float(self.rule.reach(steps)) + self.rule.settings.jump_m
-        G = self.regions[regions]
+        A, B = self.regions[regions], self._walks_along(vclass, W, H, e, x)
+        G = np.concatenate([_pad_to(A, max(A.shape[1], B.shape[1])), _pad_to(B, max(A.shape[1], B.shape[1]))])
         # every (pedestrian, region) pair: regions tiled over pedestrians, each pedestrian repeated per region
         d = point_polygon_distance(np.tile(G, (len(peds), 1, 1)), np.repeat(peds, len(G), axis=0))
         return bool(d.min() > reach)
+
+    def _walks_along(self, vclass: str, W: np.ndarray, H: np.ndarray, e: int, x: int) -> np.ndarray:
+        """The pedestrian rule's walking regions (m, k, 2) that the claim boxes at waypoints ``e .. x``
+        meet (:meth:`~tm.authority_gate.AuthorityReach.claim_half`)."""
+        R = self.rule.regions
+        if not len(R):
+            return R
+        idx = np.arange(e, x + 1)
+        half = self.classes[vclass].claim_half(H[idx], H[np.minimum(idx + 1, len(H) - 1)])
+        lo, hi = W[idx] - half, W[idx] + half
+        near = np.all((lo[:, None] <= self.rule.hi[None] + GEOMETRY_TOL)
+                      & (hi[:, None] >= self.rule.lo[None] - GEOMETRY_TOL), axis=2)
+        i, g = np.nonzero(near)
+        if not len(i):
+            return R[:0]
+        hit = intersect_sat(_box_corners(lo[i], hi[i]), R[g], GEOMETRY_TOL)
+        return R[np.unique(g[hit])]

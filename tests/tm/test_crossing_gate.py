@@ -146,6 +146,21 @@ def test_entry_waits_for_pedestrians_within_the_passage_reach(d, withheld):
     assert _entry(peds=[[0.0, 3.5 + d]])[0] is withheld
 
 
+@pytest.mark.parametrize("y0, withheld", [(1.5, True), (2.5, False)])
+def test_entry_counts_a_walking_area_beside_the_run_that_its_claims_reach(y0, withheld):
+    """A walking area at x in [2.5, 6], y in [y0, 4] beside the road past the crossing: the run's
+    claim boxes (across 1.0 + 0.9 = 1.9 m) meet it for y0 = 1.5, not for 2.5 (hold boxes reach 1.1 m:
+    it is in no run either way).  A pedestrian 10.3 m north of it is within the threshold of it
+    (10.8 m) but not of the crossing (hypot(2.25, 10.8) = 11.03 m): withheld only when the claims
+    reach the walking area."""
+    walk = np.array([[2.5, y0], [6.0, y0], [6.0, 4.0], [2.5, 4.0]])
+    rule = PedestrianRule(PEDS, [CROSSING, walk], TS)
+    gate = CrossingGate([CROSSING], {"car": CAR}, {"car": N + rule.hold_steps}, rule)
+    out = gate.withhold(["car"], ["car"], [(W, H, ENTRY - 1)], [True], np.array([[4.25, 4.0 + 10.3]]),
+                        np.full((1, 2), np.inf), np.full((1, 2), -np.inf))
+    assert out.tolist() == [withheld]
+
+
 def test_entry_needs_room_at_the_exit():
     x = W[EXIT, 0]
     on_exit = ((x + 2.0, -1.0), (x + 6.0, 1.0))           # meets the exit's hold box [x - 2.25, x + 2.25]
