@@ -27,6 +27,7 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import assume, given, settings, strategies as st
 
 from tm.authority_gate import AuthorityReach
 from tm.crossing_gate import CrossingGate
@@ -205,3 +206,66 @@ def test_bad_inputs_are_named():
     gate = CrossingGate([CROSSING], {"car": CAR}, {"car": N}, rule)
     with pytest.raises(ValueError, match="one each per vehicle"):
         gate.withhold(["car"], ["car"], [], [True], np.zeros((0, 2)), np.zeros((1, 2)), np.zeros((1, 2)))
+
+
+SIDES = {"w": (np.array([-2.0, 0.0]), np.array([-1.0, 0.0])), "e": (np.array([2.0, 0.0]), np.array([1.0, 0.0])),
+         "n": (np.array([0.0, 3.5]), np.array([0.0, 1.0])), "s": (np.array([0.0, -3.5]), np.array([0.0, -1.0]))}
+
+
+@settings(max_examples=400, deadline=None)
+@given(side=st.sampled_from(sorted(SIDES)), off=st.floats(-1.0, 1.0), D=st.floats(THRESHOLD - 0.5, THRESHOLD + 1.0),
+       j=st.one_of(st.just(EXIT - ENTRY), st.integers(0, EXIT - ENTRY)),
+       frac=st.one_of(st.just(1.0), st.floats(0.0, 1.0)), l=st.one_of(st.just(N), st.integers(0, N)),
+       full=st.booleans(), seed=st.integers(0, 2 ** 31 - 1))
+def test_a_pedestrian_the_gate_let_pass_cannot_withhold_a_request_of_the_passage(side, off, D, j, frac, l, full, seed):
+    """The liveness argument of the module notes as a property: when the gate grants the entry with
+    a pedestrian at ``p`` (D m out from a side of the crossing, offset ``off`` along it: on the road
+    behind or ahead of the car, or beside it), then ``j <= EXIT - ENTRY`` steps later that
+    pedestrian, moved straight towards the crossing by up to ``v j Ts + jump_m`` (the bound the rule
+    assumes), does not make the pedestrian rule withhold any claim whose boxes lie in the run's claim
+    boxes (waypoints ENTRY .. EXIT, ``claim_half``), whatever its index ``l <= N``: every box the
+    whole of them (``full``) or random sub-boxes, some empty.  Pedestrians the gate withholds for
+    are skipped (``D`` spans the threshold on both sides)."""
+    walk = np.array([[2.5, 1.5], [6.0, 1.5], [6.0, 4.0], [2.5, 4.0]])   # beside the run (test above)
+    rule = PedestrianRule(PEDS, [CROSSING, walk], TS)
+    gate = CrossingGate([CROSSING], {"car": CAR}, {"car": N + rule.hold_steps}, rule)
+    edge, out = SIDES[side]
+    p0 = (edge + D * out + off * out[::-1])[None]
+    entry = gate.withhold(["car"], ["car"], [(W, H, ENTRY - 1)], [True], p0, np.full((1, 2), np.inf),
+                          np.full((1, 2), -np.inf))[0]
+    assume(not entry)
+    p1 = p0 - frac * (PEDS.v_max * j * TS + PEDS.jump_m) * out
+    half = CAR.claim_half(np.zeros(1))[0]                               # 2.25 along, 1.9 across
+    c_lo, c_hi = np.array([W[ENTRY, 0] - half[0], -half[1]]), np.array([W[EXIT, 0] + half[0], half[1]])
+    K = N + 2
+    if full:
+        lo, hi = np.tile(c_lo, (K, 1)), np.tile(c_hi, (K, 1))
+    else:
+        rng = np.random.default_rng(seed)
+        a, b = rng.uniform(c_lo, c_hi, (K, 2)), rng.uniform(c_lo, c_hi, (K, 2))
+        lo, hi = np.minimum(a, b), np.maximum(a, b)
+        empty = rng.random(K) < 0.2
+        lo[empty], hi[empty] = 1.0, 0.0
+    claim = ReachClaims(np.zeros((1, 2)), np.zeros(1), lo[None], hi[None])
+    assert not rule.withhold_reach(claim, [l], p1)[0]
+
+
+@pytest.mark.parametrize("slack, withheld", [(0.01, False), (-0.01, True)])
+def test_the_threshold_is_tight_for_a_pedestrian_walking_up_the_road(slack, withheld):
+    """A pedestrian on the road behind the car, THRESHOLD + slack m west of the crossing: the gate
+    lets the car enter (slack 0.01 m) and then, after EXIT - ENTRY steps walking east at the bound
+    (v j Ts + jump_m = 2.1 m), the pedestrian rule does not withhold a claim of index N over the run's
+    claim boxes; 0.02 m closer it would (the reach it then has is 8.7 m = reach(N)): the gate's
+    threshold has no slack to spare.  (0.01 m: far above round-off of O(10) m sums, ~1e-14.)"""
+    rule = PedestrianRule(PEDS, [CROSSING], TS)
+    gate = CrossingGate([CROSSING], {"car": CAR}, {"car": N + rule.hold_steps}, rule)
+    p0 = np.array([[-2.0 - THRESHOLD - slack, 0.0]])
+    entry = gate.withhold(["car"], ["car"], [(W, H, ENTRY - 1)], [True], p0, np.full((1, 2), np.inf),
+                          np.full((1, 2), -np.inf))[0]
+    assert entry is np.bool_(withheld)
+    p1 = p0 + np.array([[PEDS.v_max * (EXIT - ENTRY) * TS + PEDS.jump_m, 0.0]])
+    half = CAR.claim_half(np.zeros(1))[0]
+    lo = np.tile([W[ENTRY, 0] - half[0], -half[1]], (N + 2, 1))
+    hi = np.tile([W[EXIT, 0] + half[0], half[1]], (N + 2, 1))
+    claim = ReachClaims(np.zeros((1, 2)), np.zeros(1), lo[None], hi[None])
+    assert rule.withhold_reach(claim, [N], p1)[0] == withheld
