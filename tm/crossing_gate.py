@@ -45,8 +45,9 @@ vehicle on the crossing, and a vehicle standing past the exit cannot either.  Th
 may still deny a passage request for another vehicle's claims (a vehicle entering the exit road
 from elsewhere), and a person appearing within ``reach(H)`` during the passage may still withhold
 it: then the vehicle can stop on the crossing, as before; so may a pedestrian near a walking
-region that only the passage claims' part behind the entry meets (not counted above).  Safety is untouched: the rule only ever
-withholds requests (every grant is still checked by the pedestrian rule and the traffic manager).
+region that only the passage claims' part behind the entry meets (not counted above).  Safety
+is untouched: the rule only ever withholds requests (every grant is still checked by the
+pedestrian rule and the traffic manager).
 
 Pure numpy, no simulator.
 """
