@@ -22,6 +22,7 @@ _COUNT_NAMES = ("vehicles", "vehicles_total", "vehicles_arrived", "steps", "coll
                 "collisions_geometric", "invariant_violations", "constraint_violations", "stop_commands",
                 "stop_episodes", "halt_episodes", "denials", "seed", "vehicles_censored", "vehicles_paired",
                 "demand_seed", "red_violations", "signal_withheld", "pedestrian_conflicts", "pedestrian_withheld",
+                "crossing_withheld",
                 "persons_arrived", "vehicles_undrivable", "claim_violations", "footprint_overlaps", "zones",
                 "zones_ignored", "junction_tokens", "junction_given_back", "junction_withheld",
                 "vehicles_over_limit")

@@ -10,7 +10,9 @@ manager.  One step (``Ts``) is:
    ``(l', r̄)`` w.r.t. the next waypoint; requests into a junction guard
    without one of its tokens are withheld (liveness: :mod:`tm.junctions`),
    and so are requests whose claim meets a walking region a pedestrian can
-   reach within its horizon (:mod:`tm.pedestrians`);
+   reach within its horizon (:mod:`tm.pedestrians`) and, in authority mode,
+   requests that would move a stop point onto a crossing the vehicle cannot
+   clear (:mod:`tm.crossing_gate`);
 2. the TM grants or denies the requests (:class:`tm.manager.TrafficManager`);
 3. granted vehicles switch; every vehicle applies the terminal law or the
    QP of eq. (6) (:class:`controllers.stmpc.STMPC`, vectorised per class);
@@ -45,6 +47,7 @@ from tm.reach_cache import ClaimCache
 from tm.junctions import ClassReach, JunctionFleet, JunctionGate, Zone
 from tm.manager import FleetState, TrafficManager
 from tm.pedestrians import STRIPING_SPEED_FACTOR, PedestrianRule, footprint_contacts
+from tm.crossing_gate import CrossingGate
 from tm.monitor import Monitor
 from tm.settings import TMSettings
 from tm.signals import SignalBook, SignalSettings, StopLines, withhold as signal_withhold
@@ -171,7 +174,8 @@ class Cosim:
 
     def __init__(self, classes, specs, settings: CosimSettings, world=None,
                  synthesis: SynthesisSettings | None = None, zones: list[Zone] | None = None,
-                 observers: list | None = None, pedestrians: PedestrianRule | None = None):
+                 observers: list | None = None, pedestrians: PedestrianRule | None = None,
+                 crossings: list | None = None):
         self.settings = settings
         #: The pedestrian rule (None: no pedestrians); positions come from ``world.pedestrians()``.
         self.pedestrians = pedestrians
@@ -266,6 +270,14 @@ class Cosim:
                 c: ClassReach.of(f.position_sets, self.classes[c].length, self.classes[c].width,
                                  self.classes[c].model.frame == "road") for c, f in self.families.items()})
         self._claims_now: ReachClaims | None = None  # authority: this step's claims before the decision
+        self._junction_fleet: JunctionFleet | None = None  # this step's fleet as the junction gate saw it
+        #: authority mode with pedestrians: stop points never rest on a crossing they cannot clear
+        #: (``crossings``: the crossing regions; tm.crossing_gate)
+        self.crossing_gate = None
+        if self.authority and pedestrians is not None and crossings:
+            self.crossing_gate = CrossingGate(crossings, self.junctions.classes,
+                                              {c: f.N + pedestrians.hold_steps for c, f in self.families.items()},
+                                              pedestrians)
         self._ms_request = self._ms_gate = 0.0  # this step's request indices and junction tokens
         # traffic lights (tm.signals): the vehicles' stop lines; link states read once per step
         self.signal_book = SignalBook(settings.signals)
@@ -342,6 +354,7 @@ class Cosim:
         requests into a junction guard without its token withheld (:meth:`_gate`)."""
         state = self._fleet(with_requests=True)
         self._link_state = None
+        self._junction_fleet = None
         self._claims_now = self._current_claims() if self.authority and state is not None else None
         if state is not None and len(self.signal_book):
             state = self._signals(state)
@@ -402,12 +415,33 @@ class Cosim:
             stop = self.pedestrians.withhold_reach(self._requested_reach(state), state.req_index[r], peds)
         else:
             stop = self.pedestrians.withhold(self._request_claims(state)[2], peds)
+        if stop.any():
+            self.pedestrian_withheld += int(stop.sum())
+            req = state.requesting.copy()
+            req[r[stop]] = False
+            state = replace(state, requesting=req)
+        if self.crossing_gate is not None and state.requesting.any():
+            state = self._crossings(state, peds)
+        return state
+
+    def _crossings(self, state: FleetState, peds: np.ndarray) -> FleetState:
+        """Authority mode: withhold requests that would put a stop point on a crossing the vehicle
+        cannot clear before a pedestrian can reach it, or without room past it (tm.crossing_gate)."""
+        live = [g for g in self.groups.values() if g.ids]
+        routes = [(W, H, k) for g in live for W, H, k in zip(g.W, g.H, g.k.tolist())]
+        b = self._claims_now.slot_boxes[:, :, -1]  # where each vehicle stays if denied from now on
+        fleet = self._junction_fleet
+        limit = None if fleet is None else (lambda i: self.junctions.stop_limit(fleet, i))
+        stop = self.crossing_gate.withhold(state.ids, state.family, routes, state.requesting, peds,
+                                           np.column_stack([b[0], b[2]]), np.column_stack([b[1], b[3]]), limit)
         if not stop.any():
             return state
-        self.pedestrian_withheld += int(stop.sum())
-        req = state.requesting.copy()
-        req[r[stop]] = False
-        return replace(state, requesting=req)
+        return replace(state, requesting=state.requesting & ~stop)
+
+    @property
+    def crossing_withheld(self) -> int:
+        """Requests withheld by the crossing gate (authority mode with pedestrians), over the run."""
+        return 0 if self.crossing_gate is None else self.crossing_gate.withheld
 
     def _count_red_crossings(self) -> None:
         """Front bumpers that crossed a stop line on red in this step (``red_violations``)."""
@@ -462,6 +496,7 @@ class Cosim:
         fleet = JunctionFleet(state.ids, state.family, cur_lo, cur_hi,
                               tuple((g.W, g.H, g.k) for g in self.groups.values() if g.ids))
         req = self.junctions.withhold(self.t, fleet, state.requesting, new_lo, new_hi)
+        self._junction_fleet = fleet
         if not len(r):
             return state
         return replace(state, requesting=req)

@@ -96,7 +96,7 @@ def _grow(P: np.ndarray, margin: float) -> np.ndarray:
     return convex_hull((np.asarray(P)[:, None, :] + sq[None]).reshape(-1, 2))
 
 
-def walk_regions(net_path, margin_m: float = WALK_MARGIN_M) -> list[np.ndarray]:
+def walk_regions(net_path, margin_m: float = WALK_MARGIN_M, functions=WALK_FUNCTIONS) -> list[np.ndarray]:
     """Convex polygons covering the net's crossings and walking areas.
 
     Parameters
@@ -105,16 +105,21 @@ def walk_regions(net_path, margin_m: float = WALK_MARGIN_M) -> list[np.ndarray]:
         A SUMO net (``.net.xml`` or gzipped).
     margin_m : float
         Every region grown by this margin (m), :data:`WALK_MARGIN_M`.
+    functions : tuple of str
+        The edge functions read, of :data:`WALK_FUNCTIONS` (``("crossing",)``: the crossings only).
 
     Returns
     -------
     list of ndarray (k, 2)
         Empty when the net has no crossing nor walking area.
     """
+    bad = [f for f in functions if f not in WALK_FUNCTIONS]
+    if bad:
+        raise ValueError(f"walk_regions: functions {bad} unknown; valid: {WALK_FUNCTIONS}")
     regions: list[np.ndarray] = []
     for e in parse_xml(net_path).getroot().iter("edge"):
         fn = e.get("function")
-        if fn not in WALK_FUNCTIONS:
+        if fn not in functions:
             continue
         for lane in e.iter("lane"):
             shape = lane.get("shape")

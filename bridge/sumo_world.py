@@ -493,7 +493,7 @@ def run_sumo(target: str, out: Path, opts) -> dict:
                               walk_regions(net), settings.Ts)
         summary["options"]["pedestrians"] = "guard" if peds.settings.enabled else "ignore"
         sim = Cosim(classes, specs, settings, world=world, zones=junction_zones(net), observers=observers,
-                    pedestrians=peds)
+                    pedestrians=peds, crossings=walk_regions(net, functions=("crossing",)))
         bar = None
         if not getattr(opts, "quiet", False):
             from tqdm import tqdm
@@ -538,7 +538,7 @@ def run_sumo(target: str, out: Path, opts) -> dict:
                 route_offset_max_m=round(world.offset_max_m, 4) if world is not None else 0.0,
                 red_violations=sim.red_violations, signal_withheld=sim.signal_book.withheld,
                 pedestrian_conflicts=len(sim.pedestrian_conflicts),
-                pedestrian_withheld=sim.pedestrian_withheld,
+                pedestrian_withheld=sim.pedestrian_withheld, crossing_withheld=sim.crossing_withheld,
                 pedestrian_speed_bound_mps=round(sim.pedestrians.v_max, 4),
                 vehicles_total=figures["vehicles"],
                 stop_reason=stop_reason(limit, figures["vehicles"], figures["vehicles_arrived"],

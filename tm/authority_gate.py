@@ -108,6 +108,11 @@ class AuthorityReach:
         """World half extents (n, 2) of the hold box ``T^0 ⊕ footprint`` at the headings."""
         return _world_half(self.hold + 0.5 * self.length, self.hold_y + 0.5 * self.width, *headings)
 
+    def claim_half(self, *headings: np.ndarray) -> np.ndarray:
+        """World half extents (n, 2) of what a claim with its stop point at a waypoint covers there:
+        ``T^0`` along plus ``L/2``, the claims' across half-width plus ``W/2`` across."""
+        return _world_half(self.hold + 0.5 * self.length, self.across + 0.5 * self.width, *headings)
+
     def half_extent(self, *headings: np.ndarray) -> np.ndarray:
         """World half extents (n, 2) of a corridor box around a waypoint at the headings: the hold
         box ``T^0 ⊕ footprint`` of every stop point within ``δ/2`` of it (module notes)."""
@@ -186,6 +191,20 @@ class AuthorityGate(JunctionGate):
         exits = last + 1 < len(W)
         found = self._spans[vid] = (z[starts], i[starts], np.where(exits, last + 1, len(W) - 1), exits)
         return found
+
+    def stop_limit(self, fleet: JunctionFleet, row: int) -> int:
+        """The furthest waypoint row ``row``'s stop point may reach without a zone token it does not
+        hold: one before the first entry beyond its requested stop point ``k + 1`` of an interval
+        whose token it does not hold (or gave back), else the route's last waypoint."""
+        zs, e, _, _ = self.intervals(fleet, row)
+        W, _, k = fleet.route(row)
+        vid = fleet.ids[row]
+        back = self.given_back.get(vid, ())
+        limit = len(W) - 1
+        for z, en in zip(zs.tolist(), e.tolist()):
+            if en > k + 1 and (vid not in self.holders[z] or z in back):
+                limit = min(limit, en - 1)
+        return limit
 
     def _span_of(self, fleet: JunctionFleet, row: int, z: int, target: int):
         """``(entry, exit, exits)`` of zone ``z``'s interval holding waypoint ``target``, or None."""

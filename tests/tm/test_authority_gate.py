@@ -126,6 +126,18 @@ def test_without_the_token_the_stop_point_stays_before_the_entry_line():
     assert _holders(gate) == {"A"}
 
 
+def test_stop_limit_is_before_the_entry_line_without_the_token_and_the_route_end_with_it():
+    """What the crossing gate asks (tm.crossing_gate): how far A's stop point may go without a token
+    it does not hold: ENTRY - 1 before the token, the route's end with it, ENTRY - 1 again once given back."""
+    gate = _gate()
+    last = len(_route(*EAST)[0]) - 1
+    assert gate.stop_limit(Scene({"A": EAST}, k={"A": ENTRY - 5}).fleet(), 0) == ENTRY - 1
+    assert Scene({"A": EAST}, k={"A": ENTRY - 1}).withhold(gate) == {"A"} == _holders(gate)
+    assert gate.stop_limit(Scene({"A": EAST}, k={"A": ENTRY - 3}).fleet(), 0) == last
+    gate.give_back(["A"])
+    assert gate.stop_limit(Scene({"A": EAST}, k={"A": ENTRY - 3}).fleet(), 0) == ENTRY - 1
+
+
 def test_the_holder_moves_its_stop_point_through_to_the_exit_slot_and_on():
     """With the token, A's stop point moves from before the entry line through the zone to its
     exit slot and beyond, while B (crossing) waits at its entry line the whole time."""
