@@ -8,12 +8,17 @@ waiting order, corridors and exit-slot room of :class:`tm.junctions.JunctionGate
 changes is where they apply:
 
 * **guard**: the zone enlarged by the claims' across half-width (``max |y|`` over the across
-  factor's levels) plus half the footprint's diagonal, per class (:attr:`AuthorityReach.guard_reach`;
-  the gate's shared guard boxes, :meth:`AuthorityGate.guard_radius`, take the largest, and a
-  class's own guard is tested by shrinking its boxes by the difference);
+  factor's levels) plus half the footprint's diagonal, per class (:attr:`AuthorityReach.guard_reach`);
+  the gate's shared guard boxes, :meth:`AuthorityGate.guard_radius`, take the largest over the
+  fleet's classes.  Entry lines and exit slots are on the shared guard; only the release tests a
+  class's own guard (the shared boxes shrunk by the difference);
 * **entry line**: without the zone's token a vehicle may not move its stop point to a waypoint
-  whose hold box ``T^0 ⊕ footprint`` meets the guard -- its stop point stays behind the guard's
-  edge less the ``T^0`` extent and ``L/2`` (:meth:`AuthorityGate.intervals`);
+  whose hold box ``T^0 ⊕ footprint`` meets the shared guard -- its stop point stays behind the
+  guard's edge less the ``T^0`` extent and ``L/2`` (:meth:`AuthorityGate.intervals`).  The shared
+  guard, not the class's own: a holder's claims reach up to its own class's guard, so a car that
+  stopped at its own (smaller) guard's line could stand inside a truck holder's claim -- the truck
+  waited for the car to move and the car for the truck's token (issue 12, ``grid`` seed 1: truck
+  29 / car 12, bus 111 / car 139);
 * **exit slot**: the first waypoint after the entry whose hold box misses the guard again.  With
   the token the stop point may move up to it (and on, outside the guard, without one); the token
   is handed out only with room there for the stopped vehicle: no other vehicle's claim on the
@@ -135,7 +140,7 @@ class AuthorityGate(JunctionGate):
         super().__init__(zones, classes)
         #: vehicle id -> its route's intervals through the guards (:meth:`intervals`)
         self._spans: dict[str, tuple] = {}
-        #: per class: how much smaller than the shared guard its own guard is (m)
+        #: per class: how much smaller than the shared guard its own guard is (m; the release only)
         radius = self.guard_radius(self.classes.values())
         self._shrink = {c: radius - r.guard_reach for c, r in self.classes.items()}
         self._family: np.ndarray | None = None  # the fleet's classes during :meth:`withhold`
@@ -164,7 +169,8 @@ class AuthorityGate(JunctionGate):
 
     def intervals(self, fleet: JunctionFleet, row: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """``(zone, entry, exit, exits)``: the runs of waypoints of row ``row``'s route whose hold
-        box (``T^0 ⊕ footprint`` at the arriving and leaving headings) meets a zone's guard.
+        box (``T^0 ⊕ footprint`` at the arriving and leaving headings) meets a zone's shared guard
+        (the largest class's: no holder's claims stick out of the zone further, module notes).
 
         ``entry`` is the first waypoint of a run (the stop point may move there only with the
         zone's token), ``exit`` the first after it whose hold box misses the guard (the exit
@@ -176,7 +182,7 @@ class AuthorityGate(JunctionGate):
             return found
         W, H, _ = fleet.route(row)
         c = fleet.family[row]
-        half = self.classes[c].hold_half(H, np.r_[H[1:], H[-1:]]) - self._shrink[c]  # its class's guard
+        half = self.classes[c].hold_half(H, np.r_[H[1:], H[-1:]])  # the shared guard: every class's reach
         i, z = self.guards.pairs(W - half, W + half)
         o = np.lexsort((i, z))
         i, z = i[o], z[o]
