@@ -10,8 +10,7 @@ changes is where they apply:
 * **guard**: the zone enlarged by the claims' across half-width (``max |y|`` over the across
   factor's levels) plus half the footprint's diagonal, per class (:attr:`AuthorityReach.guard_reach`);
   the gate's shared guard boxes, :meth:`AuthorityGate.guard_radius`, take the largest over the
-  fleet's classes.  Entry lines and exit slots are on the shared guard; only the release tests a
-  class's own guard (the shared boxes shrunk by the difference);
+  fleet's classes, and every rule below is on them, for every class;
 * **entry line**: without the zone's token a vehicle may not move its stop point to a waypoint
   whose hold box ``T^0 ⊕ footprint`` meets the shared guard -- its stop point stays behind the
   guard's edge less the ``T^0`` extent and ``L/2`` (:meth:`AuthorityGate.intervals`).  The shared
@@ -31,7 +30,10 @@ changes is where they apply:
   is another one stopped in its path.  (With the moving claims' width, ``max |y|`` of every level
   plus ``W/2``, adjacent lanes' corridors meet: on ``grid``, 300 s, seeds 1 / 2: 88 / 77 of 150
   arrived, against 104 / 97 with this width.);
-* **release**: when every ``S_k`` (the bounding box of their union) has left its class's guard;
+* **release**: when every ``S_k`` (the bounding box of their union) has left the shared guard --
+  the guard of the entry line: a class's own, smaller one released a car's token at the step it
+  was handed out (its claim, from where it is to its stop point at the entry line, not yet in the
+  car's guard), and the car drove through the zone without one;
 * **queues** (:meth:`AuthorityGate._follows`): a vehicle on the same lanes behind a holder takes a
   token too when the exit road has room for all of them; and a later waiter passes one that a
   holder blocks when its corridor misses that one's (``pass_blocked``: it cannot delay it).
@@ -140,27 +142,6 @@ class AuthorityGate(JunctionGate):
         super().__init__(zones, classes)
         #: vehicle id -> its route's intervals through the guards (:meth:`intervals`)
         self._spans: dict[str, tuple] = {}
-        #: per class: how much smaller than the shared guard its own guard is (m; the release only)
-        radius = self.guard_radius(self.classes.values())
-        self._shrink = {c: radius - r.guard_reach for c, r in self.classes.items()}
-        self._family: np.ndarray | None = None  # the fleet's classes during :meth:`withhold`
-
-    def withhold(self, t: int, fleet: JunctionFleet, requesting: np.ndarray, new_lo: np.ndarray,
-                 new_hi: np.ndarray) -> np.ndarray:
-        """As :meth:`tm.junctions.JunctionGate.withhold`; ``new_lo``, ``new_hi`` are not used."""
-        self._family = fleet.family
-        try:
-            return super().withhold(t, fleet, requesting, new_lo, new_hi)
-        finally:
-            self._family = None
-
-    def _release(self, pos: dict, cur_lo: np.ndarray, cur_hi: np.ndarray) -> None:
-        """Release the tokens of holders gone or whose claims (every ``S_k``) have left their
-        class's guard (the zone plus that class's :attr:`AuthorityReach.guard_reach`)."""
-        if self._family is None or not len(cur_lo):
-            return super()._release(pos, cur_lo, cur_hi)
-        d = np.array([self._shrink[c] for c in self._family.tolist()])[:, None]
-        super()._release(pos, cur_lo + d, cur_hi - d)  # a box shrunk by d against the guard
 
     @staticmethod
     def guard_radius(classes) -> float:

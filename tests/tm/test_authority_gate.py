@@ -92,11 +92,11 @@ def test_the_guard_is_the_zone_plus_the_claims_across_half_width_and_the_footpri
     assert zs.tolist() == [0] and entry.tolist() == [ENTRY] and exit_.tolist() == [EXIT] and exits.tolist() == [True]
 
 
-def test_entry_lines_and_exit_slots_use_the_largest_guard_release_the_class_own():
+def test_every_rule_is_on_the_largest_guard():
     """With a bus class (claims 1.4 m across, 12 m x 2.5 m: its guard reaches 7.53 m past the zone)
-    the gate's shared guard boxes grow to the bus's, and so do a car's entry line and exit slot
-    (every class stops before any holder's claim: next test); its release stays its own: a car
-    whose tail is 0.2 m outside the car's guard (well inside the bus's) gives its token back."""
+    the gate's guard boxes grow to the bus's, and so do a car's entry line and exit slot (every
+    class stops before any holder's claim: next test) and its release: a car keeps its token while
+    its claim reaches 0.2 m into the bus's guard, 0.2 m outside it releases it."""
     bus = AuthorityReach(hold=0.25, hold_y=0.2, across=1.4, length=12.0, width=2.5, delta=1.0)
     g_bus = 5.0 + 1.4 + 0.5 * np.hypot(12.0, 2.5)
     gate = AuthorityGate([J], {"car": CAR, "bus": bus})
@@ -110,9 +110,29 @@ def test_entry_lines_and_exit_slots_use_the_largest_guard_release_the_class_own(
     # bus: x - 30 + 6.25 meets the guard from x = -18 (index 12); leaves it at x = 19 (index 49)
     assert [a.tolist() for a in gate.intervals(bus_fleet, 0)] == [[0], [12], [49], [True]]
     assert scene.withhold(gate, t=0) == {"A"}
-    claim = ((GUARD + 0.2, -1.6 - HOLD[1]), (15.0 + HOLD[0], -1.6 + HOLD[1]))
-    scene = Scene({"A": EAST, "B": NORTH}, k={"A": 45, "B": 15}, claims={"A": claim})
-    assert GUARD + 0.2 < g_bus and scene.withhold(gate, t=1) == {"A", "B"} and _holders(gate) == {"B"}
+    for t, (tail, held) in enumerate(((g_bus - 0.2, True), (g_bus + 0.2, False)), start=1):
+        claim = ((tail, -1.6 - HOLD[1]), (30.0, -1.6 + HOLD[1]))
+        scene = Scene({"A": EAST, "B": NORTH}, k={"A": 50, "B": 15}, claims={"A": claim})
+        assert GUARD + 0.2 < tail and scene.withhold(gate, t=t) == ({"A"} if held else {"A", "B"}), tail
+        assert _holders(gate) == ({"A"} if held else {"B"})
+
+
+def test_a_token_handed_out_at_the_entry_line_is_kept():
+    """A car takes the token with its stop point at its entry line (index 16, x = -14, on the bus's
+    guard); its claim runs from 20 m behind to the hold box there (front x = -11.75): in the bus's
+    guard (from -12.53), not yet in the car's own (from -8.19).  A keeps the token and B, crossing,
+    waits.  (Released against the car's own guard, the token went to B in the same round and A
+    drove into the zone without one: on ``grid`` seed 1, 300 s, 361 stop points in a zone without
+    its token.)"""
+    bus = AuthorityReach(hold=0.25, hold_y=0.2, across=1.4, length=12.0, width=2.5, delta=1.0)
+    gate = AuthorityGate([J], {"car": CAR, "bus": bus})
+    k = {"A": 15, "B": 15}
+    assert Scene({"A": EAST, "B": NORTH}, k=k).withhold(gate, t=0) == {"A"} == _holders(gate)
+    claim = ((-34.0 - HOLD[0], -1.6 - HOLD[1]), (-14.0 + HOLD[0], -1.6 + HOLD[1]))
+    assert -GUARD > claim[1][0] > -gate.hi[0][0]
+    for t in range(1, 4):
+        scene = Scene({"A": EAST, "B": NORTH}, k={"A": 16, "B": 15}, claims={"A": claim})
+        assert scene.withhold(gate, t=t) == {"A"} and _holders(gate) == {"A"}, t
 
 
 #: A truck: claims 1.6 m across, 7 m x 2.4 m; its claims stick 1.6 + hypot(7, 2.4) / 2 = 5.3 m out of
