@@ -8,12 +8,16 @@ waiting order, corridors and exit-slot room of :class:`tm.junctions.JunctionGate
 changes is where they apply:
 
 * **guard**: the zone enlarged by the claims' across half-width (``max |y|`` over the across
-  factor's levels) plus half the footprint's diagonal, per class (:attr:`AuthorityReach.guard_reach`;
-  the gate's shared guard boxes, :meth:`AuthorityGate.guard_radius`, take the largest, and a
-  class's own guard is tested by shrinking its boxes by the difference);
+  factor's levels) plus half the footprint's diagonal, per class (:attr:`AuthorityReach.guard_reach`);
+  the gate's shared guard boxes, :meth:`AuthorityGate.guard_radius`, take the largest over the
+  fleet's classes, and every rule below is on them, for every class;
 * **entry line**: without the zone's token a vehicle may not move its stop point to a waypoint
-  whose hold box ``T^0 ⊕ footprint`` meets the guard -- its stop point stays behind the guard's
-  edge less the ``T^0`` extent and ``L/2`` (:meth:`AuthorityGate.intervals`);
+  whose hold box ``T^0 ⊕ footprint`` meets the shared guard -- its stop point stays behind the
+  guard's edge less the ``T^0`` extent and ``L/2`` (:meth:`AuthorityGate.intervals`).  The shared
+  guard, not the class's own: a holder's claims reach up to its own class's guard, so a car that
+  stopped at its own (smaller) guard's line could stand inside a truck holder's claim -- the truck
+  waited for the car to move and the car for the truck's token (issue 12, ``grid`` seed 1: truck
+  29 / car 12, bus 111 / car 139);
 * **exit slot**: the first waypoint after the entry whose hold box misses the guard again.  With
   the token the stop point may move up to it (and on, outside the guard, without one); the token
   is handed out only with room there for the stopped vehicle: no other vehicle's claim on the
@@ -26,7 +30,10 @@ changes is where they apply:
   is another one stopped in its path.  (With the moving claims' width, ``max |y|`` of every level
   plus ``W/2``, adjacent lanes' corridors meet: on ``grid``, 300 s, seeds 1 / 2: 88 / 77 of 150
   arrived, against 104 / 97 with this width.);
-* **release**: when every ``S_k`` (the bounding box of their union) has left its class's guard;
+* **release**: when every ``S_k`` (the bounding box of their union) has left the shared guard --
+  the guard of the entry line: a class's own, smaller one released a car's token at the step it
+  was handed out (its claim, from where it is to its stop point at the entry line, not yet in the
+  car's guard), and the car drove through the zone without one;
 * **queues** (:meth:`AuthorityGate._follows`): a vehicle on the same lanes behind a holder takes a
   token too when the exit road has room for all of them; and a later waiter passes one that a
   holder blocks when its corridor misses that one's (``pass_blocked``: it cannot delay it).
@@ -140,27 +147,6 @@ class AuthorityGate(JunctionGate):
         super().__init__(zones, classes)
         #: vehicle id -> its route's intervals through the guards (:meth:`intervals`)
         self._spans: dict[str, tuple] = {}
-        #: per class: how much smaller than the shared guard its own guard is (m)
-        radius = self.guard_radius(self.classes.values())
-        self._shrink = {c: radius - r.guard_reach for c, r in self.classes.items()}
-        self._family: np.ndarray | None = None  # the fleet's classes during :meth:`withhold`
-
-    def withhold(self, t: int, fleet: JunctionFleet, requesting: np.ndarray, new_lo: np.ndarray,
-                 new_hi: np.ndarray) -> np.ndarray:
-        """As :meth:`tm.junctions.JunctionGate.withhold`; ``new_lo``, ``new_hi`` are not used."""
-        self._family = fleet.family
-        try:
-            return super().withhold(t, fleet, requesting, new_lo, new_hi)
-        finally:
-            self._family = None
-
-    def _release(self, pos: dict, cur_lo: np.ndarray, cur_hi: np.ndarray) -> None:
-        """Release the tokens of holders gone or whose claims (every ``S_k``) have left their
-        class's guard (the zone plus that class's :attr:`AuthorityReach.guard_reach`)."""
-        if self._family is None or not len(cur_lo):
-            return super()._release(pos, cur_lo, cur_hi)
-        d = np.array([self._shrink[c] for c in self._family.tolist()])[:, None]
-        super()._release(pos, cur_lo + d, cur_hi - d)  # a box shrunk by d against the guard
 
     @staticmethod
     def guard_radius(classes) -> float:
@@ -169,7 +155,8 @@ class AuthorityGate(JunctionGate):
 
     def intervals(self, fleet: JunctionFleet, row: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """``(zone, entry, exit, exits)``: the runs of waypoints of row ``row``'s route whose hold
-        box (``T^0 ⊕ footprint`` at the arriving and leaving headings) meets a zone's guard.
+        box (``T^0 ⊕ footprint`` at the arriving and leaving headings) meets a zone's shared guard
+        (the largest class's: no holder's claims stick out of the zone further, module notes).
 
         ``entry`` is the first waypoint of a run (the stop point may move there only with the
         zone's token), ``exit`` the first after it whose hold box misses the guard (the exit
@@ -181,7 +168,7 @@ class AuthorityGate(JunctionGate):
             return found
         W, H, _ = fleet.route(row)
         c = fleet.family[row]
-        half = self.classes[c].hold_half(H, np.r_[H[1:], H[-1:]]) - self._shrink[c]  # its class's guard
+        half = self.classes[c].hold_half(H, np.r_[H[1:], H[-1:]])  # the shared guard: every class's reach
         i, z = self.guards.pairs(W - half, W + half)
         o = np.lexsort((i, z))
         i, z = i[o], z[o]

@@ -42,26 +42,31 @@ def _route(start, end):
 
 
 class Scene:
-    """Vehicles ``id -> (start, end)`` at stop point ``k`` (0 unless given), requesting ``k + 1``
-    unless listed in ``idle``; claim boxes: ``claims[id] = (lo, hi)``, else the hold box at ``k``."""
+    """Vehicles ``id -> (start, end)`` (or ``id -> (W, H)`` routes, ``routes``) at stop point ``k``
+    (0 unless given), requesting ``k + 1`` unless listed in ``idle``; claim boxes: ``claims[id] =
+    (lo, hi)``, else the hold box at ``k``; class ``family[id]`` (``"car"`` unless given, reach
+    ``reach[class]``)."""
 
-    def __init__(self, vehicles: dict, k: dict | None = None, idle=(), claims: dict | None = None):
-        self.ids = list(vehicles)
-        self.routes = [_route(*vehicles[v]) for v in self.ids]
+    def __init__(self, vehicles: dict, k: dict | None = None, idle=(), claims: dict | None = None,
+                 family: dict | None = None, reach: dict | None = None, routes: dict | None = None):
+        self.ids = list(vehicles) + [v for v in (routes or {}) if v not in vehicles]
+        self.routes = [(routes or {}).get(v) or _route(*vehicles[v]) for v in self.ids]
         self.k = np.array([(k or {}).get(v, 0) for v in self.ids], dtype=np.intp)
         self.requesting = np.array([v not in idle for v in self.ids])
         self.claims = dict(claims or {})
+        self.family = [(family or {}).get(v, "car") for v in self.ids]
+        self.reach = {"car": CAR, **(reach or {})}
 
     def hold_box(self, i: int):
         W, H = self.routes[i]
-        h = CAR.hold_half(H[self.k[i]:self.k[i] + 1])[0]
+        h = self.reach[self.family[i]].hold_half(H[self.k[i]:self.k[i] + 1])[0]
         return W[self.k[i]] - h, W[self.k[i]] + h
 
     def fleet(self):
         boxes = [self.claims.get(v) or self.hold_box(i) for i, v in enumerate(self.ids)]
         lo = np.array([b[0] for b in boxes], dtype=float).reshape(-1, 2)
         hi = np.array([b[1] for b in boxes], dtype=float).reshape(-1, 2)
-        return JunctionFleet(self.ids, np.array(["car"] * len(self.ids)), lo, hi,
+        return JunctionFleet(self.ids, np.array(self.family), lo, hi,
                              (([W for W, _ in self.routes], [H for _, H in self.routes], self.k),))
 
     def withhold(self, gate, t=0):
@@ -87,26 +92,98 @@ def test_the_guard_is_the_zone_plus_the_claims_across_half_width_and_the_footpri
     assert zs.tolist() == [0] and entry.tolist() == [ENTRY] and exit_.tolist() == [EXIT] and exits.tolist() == [True]
 
 
-def test_each_class_has_its_own_guard():
+def test_every_rule_is_on_the_largest_guard():
     """With a bus class (claims 1.4 m across, 12 m x 2.5 m: its guard reaches 7.53 m past the zone)
-    the gate's shared guard boxes grow to the bus's, but a car's entry line, exit slot and release
-    stay its own: a car whose tail is 0.2 m outside the car's guard (well inside the bus's) gives
-    its token back."""
+    the gate's guard boxes grow to the bus's, and so do a car's entry line and exit slot (every
+    class stops before any holder's claim: next test) and its release: a car keeps its token while
+    its claim reaches 0.2 m into the bus's guard, 0.2 m outside it releases it."""
     bus = AuthorityReach(hold=0.25, hold_y=0.2, across=1.4, length=12.0, width=2.5, delta=1.0)
     g_bus = 5.0 + 1.4 + 0.5 * np.hypot(12.0, 2.5)
     gate = AuthorityGate([J], {"car": CAR, "bus": bus})
     np.testing.assert_allclose(gate.hi[0], [g_bus, g_bus], rtol=0, atol=1e-12)
-    scene = Scene({"A": EAST, "B": NORTH}, k={"A": ENTRY - 1, "B": ENTRY - 1})
+    scene = Scene({"A": EAST, "B": NORTH}, k={"A": 15, "B": 15})
     fleet = scene.fleet()
-    assert [a.tolist() for a in gate.intervals(fleet, 0)] == [[0], [ENTRY], [EXIT], [True]]
+    # car: x - 30 + 2.25 meets the bus's guard from x = -14 (index 16); leaves it at x = 15 (index 45)
+    assert [a.tolist() for a in gate.intervals(fleet, 0)] == [[0], [16], [45], [True]]
     bus_fleet = JunctionFleet(["Q"], np.array(["bus"]), fleet.claim_lo[:1], fleet.claim_hi[:1],
                               (([scene.routes[0][0]], [scene.routes[0][1]], np.array([0])),))
     # bus: x - 30 + 6.25 meets the guard from x = -18 (index 12); leaves it at x = 19 (index 49)
     assert [a.tolist() for a in gate.intervals(bus_fleet, 0)] == [[0], [12], [49], [True]]
     assert scene.withhold(gate, t=0) == {"A"}
-    claim = ((GUARD + 0.2, -1.6 - HOLD[1]), (15.0 + HOLD[0], -1.6 + HOLD[1]))
-    scene = Scene({"A": EAST, "B": NORTH}, k={"A": EXIT + 4, "B": ENTRY - 1}, claims={"A": claim})
-    assert GUARD + 0.2 < g_bus and scene.withhold(gate, t=1) == {"A", "B"} and _holders(gate) == {"B"}
+    for t, (tail, held) in enumerate(((g_bus - 0.2, True), (g_bus + 0.2, False)), start=1):
+        claim = ((tail, -1.6 - HOLD[1]), (30.0, -1.6 + HOLD[1]))
+        scene = Scene({"A": EAST, "B": NORTH}, k={"A": 50, "B": 15}, claims={"A": claim})
+        assert GUARD + 0.2 < tail and scene.withhold(gate, t=t) == ({"A"} if held else {"A", "B"}), tail
+        assert _holders(gate) == ({"A"} if held else {"B"})
+
+
+def test_a_token_handed_out_at_the_entry_line_is_kept():
+    """A car takes the token with its stop point at its entry line (index 16, x = -14, on the bus's
+    guard); its claim runs from 20 m behind to the hold box there (front x = -11.75): in the bus's
+    guard (from -12.53), not yet in the car's own (from -8.19).  A keeps the token and B, crossing,
+    waits.  (Released against the car's own guard, the token went to B in the same round and A
+    drove into the zone without one: on ``grid`` seed 1, 300 s, 361 stop points in a zone without
+    its token.)"""
+    bus = AuthorityReach(hold=0.25, hold_y=0.2, across=1.4, length=12.0, width=2.5, delta=1.0)
+    gate = AuthorityGate([J], {"car": CAR, "bus": bus})
+    k = {"A": 15, "B": 15}
+    assert Scene({"A": EAST, "B": NORTH}, k=k).withhold(gate, t=0) == {"A"} == _holders(gate)
+    claim = ((-34.0 - HOLD[0], -1.6 - HOLD[1]), (-14.0 + HOLD[0], -1.6 + HOLD[1]))
+    assert -GUARD > claim[1][0] > -gate.hi[0][0]
+    for t in range(1, 4):
+        scene = Scene({"A": EAST, "B": NORTH}, k={"A": 16, "B": 15}, claims={"A": claim})
+        assert scene.withhold(gate, t=t) == {"A"} and _holders(gate) == {"A"}, t
+
+
+#: A truck: claims 1.6 m across, 7 m x 2.4 m; its claims stick 1.6 + hypot(7, 2.4) / 2 = 5.3 m out of
+#: a zone (the car's 3.193 m): its guard reaches 10.3 m from the centre.
+TRUCK = AuthorityReach(hold=0.25, hold_y=0.2, across=1.6, length=7.0, width=2.4, delta=1.0)
+
+
+def _right_turn_east_to_north():
+    """West-bound on the east arm (y = 1.6), a right turn at (1.6, 1.6) into the north arm (x = 1.6);
+    waypoints <= 1 m apart, each heading that of the segment arriving at it."""
+    W1, H1 = _route((30.0, 1.6), (1.6, 1.6))
+    W2, H2 = _route((1.6, 1.6), (1.6, 60.0))
+    return np.vstack([W1, W2[1:]]), np.r_[H1, H2[1:]]
+
+
+def test_a_smaller_waiter_stops_before_a_bigger_holders_claims():
+    """The two-class lock of issue 12 (grid, truck 29 / car 12, bus 111 / car 139), at one junction.
+
+    T, a truck, holds the token turning right from the east arm into the north arm; B, a car, comes
+    down the north arm's other lane (x = -1.6) and crosses T's corridor, so it waits for the token
+    and moves its stop point up to its entry line.  T's claim, its body still turning at the zone's
+    edge, is the box ``guard_reach`` (5.3 m) each way around (1.6, 4.8): it reaches across B's lane
+    up to y = 10.1, 0.2 m short of the truck's guard (10.3).  With the car's own guard (8.193) as
+    its entry line B stops at y = 11, its hold box down to 8.75, inside T's claim: the traffic
+    manager must then deny T every claim on up the north arm, and B waits for T's token: neither
+    moves again.  With the entry line on the largest guard of the fleet's classes B stops at y = 13
+    (hold box from 10.75, 0.45 m outside the truck's guard), out of every claim T can make inside
+    its guard."""
+    g_truck = 5.0 + TRUCK.guard_reach
+    assert abs(TRUCK.guard_reach - 5.3) < 1e-3  # hypot(7, 2.4) / 2 = 3.7000
+    gate = AuthorityGate([J], {"car": CAR, "truck": TRUCK})
+    routes = {"T": _right_turn_east_to_north()}
+    reach, family = {"truck": TRUCK}, {"T": "truck"}
+    t_in = int(gate.intervals(Scene({}, routes=routes, family=family, reach=reach).fleet(), 0)[1][0])
+    assert Scene({"B": SOUTH}, k={"T": t_in - 1}, routes=routes, family=family,
+                 reach=reach).withhold(gate, t=0) == {"B", "T"} and _holders(gate) == {"T"}
+    claim_t = ((1.6 - TRUCK.guard_reach, 4.8 - TRUCK.guard_reach), (1.6 + TRUCK.guard_reach, 4.8 + TRUCK.guard_reach))
+    assert claim_t[1][1] + 0.2 - g_truck < 1e-9
+    kb, stuck = 0, 0
+    for t in range(1, 40):
+        scene = Scene({"B": SOUTH}, k={"T": t_in + 8, "B": kb}, idle="T", claims={"T": claim_t},
+                      routes=routes, family=family, reach=reach)
+        asked = scene.withhold(gate, t=t)
+        assert _holders(gate) == {"T"}, t
+        stuck = 0 if "B" in asked else stuck + 1
+        kb += "B" in asked
+    assert stuck > 5  # B waits at its entry line for T's token
+    lo_b, hi_b = Scene({"B": SOUTH}, k={"B": kb}).hold_box(0)
+    assert not boxes_meet(lo_b[None], hi_b[None], np.array(claim_t[0])[None], np.array(claim_t[1])[None]), \
+        (kb, lo_b, hi_b)
+    assert lo_b[1] > g_truck + 0.2 and kb == 17  # y = 13: 13 - 2.25 = 10.75
 
 
 def test_without_the_token_the_stop_point_stays_before_the_entry_line():
