@@ -92,12 +92,17 @@ class CosimSettings:
     controller: str = "paper"
     #: lane limits and curve speeds as speed bounds (controllers.speed_limits)
     speed: SpeedSettings = field(default_factory=SpeedSettings)
+    #: authority mode: reuse current claims between steps (:class:`tm.reach_cache.ClaimCache`);
+    #: False decides on fresh claims every step (the reference the cache is checked against)
+    claim_cache: bool = True
 
     def __post_init__(self) -> None:
         if not isinstance(self.speed, SpeedSettings):
             raise ValueError(f"CosimSettings.speed: must be a SpeedSettings, got {self.speed!r}")
         if self.controller not in CONTROLLERS:
             raise ValueError(f"CosimSettings.controller: must be one of {CONTROLLERS}, got {self.controller!r}")
+        if not isinstance(self.claim_cache, bool):
+            raise ValueError(f"CosimSettings.claim_cache: must be True or False, got {self.claim_cache!r}")
         if not isinstance(self.signals, SignalSettings):
             raise ValueError(f"CosimSettings.signals: must be a SignalSettings, got {self.signals!r}")
         ControllerSettings(solver=self.solver, switching=self.switching)  # validates both
@@ -225,10 +230,10 @@ class Cosim:
         #: claim models (authority mode): reach-tightened, time-indexed claims (tm.reach_book)
         self.reach = ReachBook(self.families, {c: (vc.length, vc.width) for c, vc in self.classes.items()}) \
             if self.authority else None
-        #: current claims reused between steps where sound (tm.reach_cache; authority mode; set None
-        #: to decide on fresh claims every step); with the world's body padding (SUMO's,
-        #: ``world.claim_pads``): a shifted claim only where its pad still covers the one needed now
-        self.claim_cache = ClaimCache(self.reach) if self.authority else None
+        #: current claims reused between steps where sound (tm.reach_cache; authority mode with
+        #: ``settings.claim_cache``; None: fresh claims every step); with the world's body padding
+        #: (SUMO's, ``world.claim_pads``): a shifted claim only where its pad still covers the one needed now
+        self.claim_cache = ClaimCache(self.reach) if (self.authority and settings.claim_cache) else None
         sp = settings.speed
         self.groups = {c: _Group(vc, STMPC(self.families[c], cs), decel=_look_ahead_decel(vc),
                                  slack_steps=sp.slack_steps) for c, vc in self.classes.items()}
