@@ -686,11 +686,15 @@ class Cosim:
         cur = self._fleet(with_requests=False)
         if cur is not None:
             pos = np.vstack([g.X[:, :2] for g in self.groups.values() if g.ids])
+            # the world's own bodies (SUMO's), if it has them; first: placing them moves the windows of
+            # the claims' body padding (SumoWorld.claim_pads), so the claims below have the padding the
+            # next step decides with (offered with another, they missed the offer and were shifted:
+            # an outer bound, which denied requests fresh claims grant -- tests/bridge/test_sumo_claim_cache)
+            bodies = getattr(self.world, "bodies", None)
+            polys = bodies(cur.ids, pos, cur.heading, cur.length, cur.width) if bodies is not None else None
             fresh = self._reach_claims() if self.authority else self.tm.claims(cur)
             if self.claim_cache is not None:  # the same state decides next step: its claims, as they are
                 self.claim_cache.offer(self.t, self._claim_parts(), fresh)
-            bodies = getattr(self.world, "bodies", None)  # the world's own bodies (SUMO's), if it has them
-            polys = bodies(cur.ids, pos, cur.heading, cur.length, cur.width) if bodies is not None else None
             ms = self.monitor.step(cur.ids, pos, cur.heading, cur.length, cur.width, claims=fresh,
                                    polygons=polys)
             self.world.push(list(cur.ids), pos, cur.heading)
