@@ -36,6 +36,7 @@ from controllers.settings import ControllerSettings, SynthesisSettings
 from controllers.speed_limits import SpeedSettings, free_flow_time, restart_slack, route_speeds
 from controllers.stmpc import STMPC
 from bridge.groups import _Group, _headings
+from bridge.pad_memo import PadMemo
 from controllers.synthesis import synthesize
 from tm.claims import Claims
 from tm.reach import ReachClaims, world_aabb
@@ -277,6 +278,8 @@ class Cosim:
         self._link_state: np.ndarray | None = None
         # SUMO's own bodies (bridge.sumo_body): per waypoint the claims' footprint padding
         self._pads: dict[str, np.ndarray | None] = {}
+        #: the groups' claim padding (world.claim_pads), looked up once per step (bridge.pad_memo)
+        self._pad_memo = PadMemo(self.world)
         self._window_exits = 0  # vehicle-steps past the padding's stretch (see body_window_exits)
 
     def _route_speeds(self, spec: VehicleSpec):
@@ -493,9 +496,9 @@ class Cosim:
     def _group_pads(self, g: _Group, offset: int = 0) -> np.ndarray:
         """The claims' footprint padding (n, 4) of a group's vehicles for waypoints ``k + offset``
         (``world.claim_pads``; zeros without it or in paper mode)."""
-        fn = getattr(self.world, "claim_pads", None)
-        pads = fn(g.ids, np.minimum(g.k + offset, g.K - 1)) if (self.authority and fn is not None) else None
-        return np.zeros((len(g.ids), 4)) if pads is None else pads
+        if not (self.authority and hasattr(self.world, "claim_pads")):
+            return np.zeros((len(g.ids), 4))
+        return self._pad_memo.pads(id(g), g.ids, np.minimum(g.k + offset, g.K - 1), offset)
 
     def _ahead(self, vclass: str) -> float:
         """How far past its waypoint (along its frame) a vehicle's position may be for the padding."""

@@ -76,6 +76,9 @@ class SumoWorld:
         self._pushed: dict[str, np.ndarray] = {}  # vehicles moved by the last push -> front sent
         self._pads: dict = {}               # vehicle -> PadTable (claims' padding)
         self._top: dict[str, float] = {}    # vehicle -> furthest arc position reached
+        #: changes whenever claim_pads may answer differently for the same vehicles and waypoints
+        #: (bodies placed: windows moved; a route's padding registered): bridge.pad_memo keeps answers
+        self.pads_version = 0
         self._sumo_arrived: set[str] = set()  # vehicles SUMO removed itself at their route's end
         #: Vehicle-steps whose reference point rolled back more than BACK_M or lay farther than
         #: OFFSET_MAX_M from its route (outside what the claims' padding covers).
@@ -120,6 +123,7 @@ class SumoWorld:
                 arc[k] = float(b.project(W[k:k + 1], None if s is None else [s], 1.0, 10.0)[0][0])
                 s = arc[k]
             t = self._pads[spec.id] = b.pad_table(arc, W, spec_headings(W), box_lo, box_hi)
+            self.pads_version += 1
         return t.pads(0, t.arc_k[0] - BACK_M)
 
     def claim_pads(self, ids, k) -> np.ndarray | None:
@@ -139,6 +143,7 @@ class SumoWorld:
     def _poses(self, ids, centre):
         """SUMO's bodies for reference points ``centre`` (see :mod:`bridge.sumo_body`); caches the
         front, angle and lane of each for :meth:`push`."""
+        self.pads_version += 1  # the windows of the claims' padding move with the reference points
         polys = np.empty((len(ids), 4, 2))
         for i, v in enumerate(ids):
             b = self.route_body(v)

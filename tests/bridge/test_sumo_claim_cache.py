@@ -114,3 +114,29 @@ def test_claim_cache_setting_is_a_bool():
     assert CosimSettings().claim_cache is True
     with pytest.raises(ValueError, match="CosimSettings.claim_cache"):
         CosimSettings(claim_cache="off")
+
+
+def test_pad_memo_answers_as_the_world(grid_cfg, tmp_path, monkeypatch):
+    """The shared grid (turns: non-zero padding), 30 s: every padding the co-simulation takes from
+    :class:`bridge.pad_memo.PadMemo` equals SUMO world's own ``claim_pads`` for the same vehicles
+    and waypoints at that moment (exactly), most rows are served from the memo, and some padding
+    is non-zero (the comparison is not of zeros only)."""
+    from bridge.pad_memo import PadMemo
+
+    seen = {"calls": 0, "nonzero": 0}
+    orig = PadMemo.pads
+
+    def checked(self, key, ids, k, offset=0):
+        got = orig(self, key, ids, k, offset)
+        ref = self.world.claim_pads(ids, k)
+        np.testing.assert_array_equal(got, ref)
+        seen["calls"] += 1
+        seen["nonzero"] += int(np.any(ref > 0))
+        seen["memo"] = self
+        return got
+
+    monkeypatch.setattr(PadMemo, "pads", checked)
+    s, _ = _run(grid_cfg, tmp_path / "on", "on", duration=30.0, check="union")
+    assert seen["calls"] > 100 and seen["nonzero"] > 0, seen
+    m = seen["memo"]
+    assert m.served > m.asked, (m.served, m.asked)
