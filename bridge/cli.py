@@ -303,6 +303,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "sets and cost with reach-tightened claims (design.md §7; car, bus, truck; single: a 600 m "
                         "straight)")
     r.add_argument("--tm", choices=["greedy", "optimal"], default=None, help="default: the scenario's")
+    r.add_argument("--claim-cache", choices=["on", "off"], default="on",
+                   help="authority mode: on (default): current claims reused between steps where sound "
+                        "(tm.reach_cache); off: fresh claims every step (the reference)")
     r.add_argument("--speed-limits", choices=["obey", "ignore"], default="obey",
                    help="obey (default): lanes' speed limits bound the vehicles' speed (with look-ahead); "
                         "ignore: only the class bound (the KPI speed_limit_excess_max still measures them)")

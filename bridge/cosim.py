@@ -38,6 +38,7 @@ from controllers.settings import ControllerSettings, SynthesisSettings
 from controllers.speed_limits import SpeedSettings, free_flow_time, restart_slack, route_speeds
 from controllers.stmpc import STMPC
 from bridge.groups import _Group, _headings
+from bridge.pad_memo import PadMemo
 from controllers.synthesis import synthesize
 from tm.claims import Claims
 from tm.reach import ReachClaims, world_aabb
@@ -95,12 +96,17 @@ class CosimSettings:
     controller: str = "paper"
     #: lane limits and curve speeds as speed bounds (controllers.speed_limits)
     speed: SpeedSettings = field(default_factory=SpeedSettings)
+    #: authority mode: reuse current claims between steps (:class:`tm.reach_cache.ClaimCache`);
+    #: False decides on fresh claims every step (the reference the cache is checked against)
+    claim_cache: bool = True
 
     def __post_init__(self) -> None:
         if not isinstance(self.speed, SpeedSettings):
             raise ValueError(f"CosimSettings.speed: must be a SpeedSettings, got {self.speed!r}")
         if self.controller not in CONTROLLERS:
             raise ValueError(f"CosimSettings.controller: must be one of {CONTROLLERS}, got {self.controller!r}")
+        if not isinstance(self.claim_cache, bool):
+            raise ValueError(f"CosimSettings.claim_cache: must be True or False, got {self.claim_cache!r}")
         if not isinstance(self.signals, SignalSettings):
             raise ValueError(f"CosimSettings.signals: must be a SignalSettings, got {self.signals!r}")
         ControllerSettings(solver=self.solver, switching=self.switching)  # validates both
@@ -229,10 +235,10 @@ class Cosim:
         #: claim models (authority mode): reach-tightened, time-indexed claims (tm.reach_book)
         self.reach = ReachBook(self.families, {c: (vc.length, vc.width) for c, vc in self.classes.items()}) \
             if self.authority else None
-        #: current claims reused between steps where sound (tm.reach_cache; authority mode; set None
-        #: to decide on fresh claims every step); with the world's body padding (SUMO's,
-        #: ``world.claim_pads``): a shifted claim only where its pad still covers the one needed now
-        self.claim_cache = ClaimCache(self.reach) if self.authority else None
+        #: current claims reused between steps where sound (tm.reach_cache; authority mode with
+        #: ``settings.claim_cache``; None: fresh claims every step); with the world's body padding
+        #: (SUMO's, ``world.claim_pads``): a shifted claim only where its pad still covers the one needed now
+        self.claim_cache = ClaimCache(self.reach) if (self.authority and settings.claim_cache) else None
         sp = settings.speed
         self.groups = {c: _Group(vc, STMPC(self.families[c], cs), decel=_look_ahead_decel(vc),
                                  slack_steps=sp.slack_steps) for c, vc in self.classes.items()}
@@ -284,6 +290,8 @@ class Cosim:
         self._link_state: np.ndarray | None = None
         # SUMO's own bodies (bridge.sumo_body): per waypoint the claims' footprint padding
         self._pads: dict[str, np.ndarray | None] = {}
+        #: the groups' claim padding (world.claim_pads), looked up once per step (bridge.pad_memo)
+        self._pad_memo = PadMemo(self.world)
         self._window_exits = 0  # vehicle-steps past the padding's stretch (see body_window_exits)
 
     def _route_speeds(self, spec: VehicleSpec):
@@ -523,9 +531,9 @@ class Cosim:
     def _group_pads(self, g: _Group, offset: int = 0) -> np.ndarray:
         """The claims' footprint padding (n, 4) of a group's vehicles for waypoints ``k + offset``
         (``world.claim_pads``; zeros without it or in paper mode)."""
-        fn = getattr(self.world, "claim_pads", None)
-        pads = fn(g.ids, np.minimum(g.k + offset, g.K - 1)) if (self.authority and fn is not None) else None
-        return np.zeros((len(g.ids), 4)) if pads is None else pads
+        if not (self.authority and hasattr(self.world, "claim_pads")):
+            return np.zeros((len(g.ids), 4))
+        return self._pad_memo.pads(id(g), g.ids, np.minimum(g.k + offset, g.K - 1), offset)
 
     def _ahead(self, vclass: str) -> float:
         """How far past its waypoint (along its frame) a vehicle's position may be for the padding."""
@@ -716,11 +724,15 @@ class Cosim:
         cur = self._fleet(with_requests=False)
         if cur is not None:
             pos = np.vstack([g.X[:, :2] for g in self.groups.values() if g.ids])
+            # the world's own bodies (SUMO's), if it has them; first: placing them moves the windows of
+            # the claims' body padding (SumoWorld.claim_pads), so the claims below have the padding the
+            # next step decides with (offered with another, they missed the offer and were shifted:
+            # an outer bound, which denied requests fresh claims grant -- tests/bridge/test_sumo_claim_cache)
+            bodies = getattr(self.world, "bodies", None)
+            polys = bodies(cur.ids, pos, cur.heading, cur.length, cur.width) if bodies is not None else None
             fresh = self._reach_claims() if self.authority else self.tm.claims(cur)
             if self.claim_cache is not None:  # the same state decides next step: its claims, as they are
                 self.claim_cache.offer(self.t, self._claim_parts(), fresh)
-            bodies = getattr(self.world, "bodies", None)  # the world's own bodies (SUMO's), if it has them
-            polys = bodies(cur.ids, pos, cur.heading, cur.length, cur.width) if bodies is not None else None
             ms = self.monitor.step(cur.ids, pos, cur.heading, cur.length, cur.width, claims=fresh,
                                    polygons=polys)
             self.world.push(list(cur.ids), pos, cur.heading)

@@ -129,7 +129,7 @@ def run_multi(name: str, out: Path, opts, world=None, specs=None) -> dict:
             raise ScenarioRunError(f"unknown scenario {name!r}; built-in scenarios: {', '.join(SCENARIOS)}")
     out.mkdir(parents=True, exist_ok=True)
     options = {k: getattr(opts, k) for k in ("vclass", "tm", "check", "switching", "disturbance", "solver",
-                                             "duration", "vehicles", "controller")
+                                             "duration", "vehicles", "controller", "claim_cache")
                if hasattr(opts, k)}
     summary = {"scenario": name, "seed": opts.seed, "options": options, "complete": False}
     _write_summary(out, summary)
@@ -141,7 +141,8 @@ def run_multi(name: str, out: Path, opts, world=None, specs=None) -> dict:
                                  switching=opts.switching, disturbance=opts.disturbance, solver=opts.solver,
                                  seed=opts.seed, duration_s=opts.duration,
                                  controller=getattr(opts, "controller", "paper"),
-                                 speed=SpeedSettings.from_options(opts))
+                                 speed=SpeedSettings.from_options(opts),
+                                 claim_cache=(getattr(opts, "claim_cache", None) or "on") == "on")
         observers = [HaltCounter()] + observers_for(out, getattr(opts, "log", None) or "none",
                                                     {"scenario": name, "seed": opts.seed, **options})
         observers.append(StreamingOutputs(out, dict(summary)))  # last: the row is complete by then

@@ -267,7 +267,8 @@ class PadTable:
             ref.append(p)
         self.rel = np.stack(rel, axis=1)  # (n, 3, 4, 2)
         self.ref = np.stack(ref, axis=1)  # (n, 3, 2)
-        self._memo: dict[tuple[int, int], np.ndarray] = {}
+        #: k -> (j_base, (n + 1, 4) suffix maxima of the per-sample pads from j_base on, a zero row last)
+        self._suffix: dict[int, tuple[int, np.ndarray]] = {}
         self.step = np.zeros(n)
         if n > 1:
             dr = np.diff(self.rel, axis=0)
@@ -299,14 +300,53 @@ class PadTable:
         larger side on both and on ``grid`` locked junctions (issue 12)."""
         k = int(min(max(k, 0), len(self.W) - 1))
         j0 = int(np.searchsorted(self.sig, sigma_lo, side="left"))
-        hit = self._memo.get((k, j0))
-        if hit is None:
-            hit = self._memo[(k, j0)] = self._pads(k, j0)
-            if len(self._memo) > 4096:
-                self._memo.clear()
-        return hit
+        tab = self._suffix.get(k)
+        if tab is None or j0 < tab[0]:  # a window start before the table's (rolled back): built anew from it
+            tab = self._suffix[k] = self._table(k, j0)
+            if len(self._suffix) > 64:  # waypoints left behind (a vehicle's k only grows)
+                for old in sorted(self._suffix)[:32]:
+                    del self._suffix[old]
+        base, S = tab
+        return S[min(j0 - base, len(S) - 1)]
+
+    def _table(self, k: int, j_base: int) -> tuple[int, np.ndarray]:
+        """Pads of waypoint ``k`` for every window start ``j0 >= j_base``: row ``j0 - j_base`` is
+        :meth:`_pads` ``(k, j0)`` (the same maxima of the same sample values, so the same floats);
+        past the samples that count, the zero row."""
+        j1 = int(np.searchsorted(self.sig, self.arc_k[k] + self.box_hi[0] + 2.0 * self.length, side="right"))
+        if j1 <= j_base:
+            return j_base, np.zeros((1, 4))
+        per = self._per_sample(k, j_base, j1)  # (j1 - j_base, 4), -inf where no position counts
+        suf = np.maximum.accumulate(per[::-1], axis=0)[::-1]
+        out = np.zeros((len(suf) + 1, 4))
+        out[:-1] = np.maximum(suf, 0.0)
+        return j_base, out
+
+    def _per_sample(self, k: int, j0: int, j1: int) -> np.ndarray:
+        """Per sample ``j0 <= j < j1``: how far SUMO's body reaches beyond the rectangle (back,
+        front, right, left) in waypoint ``k``'s frame, ``-inf`` where no position of the sample
+        lies in the box."""
+        out = np.full((j1 - j0, 4), -np.inf)
+        c, s = np.cos(self.H[k]), np.sin(self.H[k])
+        d = self.ref[j0:j1] - self.W[k]
+        a = c * d[..., 0] + s * d[..., 1]
+        y = -s * d[..., 0] + c * d[..., 1]
+        inside = ((a >= self.box_lo[0]) & (a <= self.box_hi[0]) &
+                  (y >= self.box_lo[1]) & (y <= self.box_hi[1])).any(axis=1)
+        if not inside.any():
+            return out
+        r = self.rel[j0:j1][inside]
+        st = self.step[j0:j1][inside]
+        ra = c * r[..., 0] + s * r[..., 1]
+        ry = -s * r[..., 0] + c * r[..., 1]
+        reach = np.array([(-ra).max(axis=(1, 2)), ra.max(axis=(1, 2)),
+                          (-ry).max(axis=(1, 2)), ry.max(axis=(1, 2))]) + st
+        half = 0.5 * np.array([self.length, self.length, self.width, self.width])
+        out[inside] = reach.T - half
+        return out
 
     def _pads(self, k: int, j0: int) -> np.ndarray:
+        """The reference computation of :meth:`pads` (one window start; tests compare the tables with it)."""
         j1 = int(np.searchsorted(self.sig, self.arc_k[k] + self.box_hi[0] + 2.0 * self.length, side="right"))
         if j1 <= j0:
             return np.zeros(4)

@@ -76,6 +76,9 @@ class SumoWorld:
         self._pushed: dict[str, np.ndarray] = {}  # vehicles moved by the last push -> front sent
         self._pads: dict = {}               # vehicle -> PadTable (claims' padding)
         self._top: dict[str, float] = {}    # vehicle -> furthest arc position reached
+        #: changes whenever claim_pads may answer differently for the same vehicles and waypoints
+        #: (bodies placed: windows moved; a route's padding registered): bridge.pad_memo keeps answers
+        self.pads_version = 0
         self._sumo_arrived: set[str] = set()  # vehicles SUMO removed itself at their route's end
         #: Vehicle-steps whose reference point rolled back more than BACK_M or lay farther than
         #: OFFSET_MAX_M from its route (outside what the claims' padding covers).
@@ -120,6 +123,7 @@ class SumoWorld:
                 arc[k] = float(b.project(W[k:k + 1], None if s is None else [s], 1.0, 10.0)[0][0])
                 s = arc[k]
             t = self._pads[spec.id] = b.pad_table(arc, W, spec_headings(W), box_lo, box_hi)
+            self.pads_version += 1
         return t.pads(0, t.arc_k[0] - BACK_M)
 
     def claim_pads(self, ids, k) -> np.ndarray | None:
@@ -139,6 +143,7 @@ class SumoWorld:
     def _poses(self, ids, centre):
         """SUMO's bodies for reference points ``centre`` (see :mod:`bridge.sumo_body`); caches the
         front, angle and lane of each for :meth:`push`."""
+        self.pads_version += 1  # the windows of the claims' padding move with the reference points
         polys = np.empty((len(ids), 4, 2))
         for i, v in enumerate(ids):
             b = self.route_body(v)
@@ -358,8 +363,11 @@ def _report_undrivable(out: Path, undrivable: dict, begin: float) -> None:
     pd.concat([df, rows], ignore_index=True).to_csv(path, index=False)
 
 
-def run_sumo(target: str, out: Path, opts) -> dict:
-    """Run a SUMO scenario (built-in name, scenario TOML or .sumocfg) and write its outputs."""
+def run_sumo(target: str, out: Path, opts, observers_extra: list | None = None) -> dict:
+    """Run a SUMO scenario (built-in name, scenario TOML or .sumocfg) and write its outputs.
+
+    ``observers_extra``: more :class:`~bridge.cosim.Cosim` observers (``on_step(sim, state,
+    decision, row)``), called before the run's own outputs; e.g. a test recording the decisions."""
     from sumo_nets.scenario import ScenarioError, load_scenario, materialise, read_sumocfg
 
     out = Path(out)
@@ -416,6 +424,7 @@ def run_sumo(target: str, out: Path, opts) -> dict:
                        options=dict(tm=tm, check=check, switching=switching, disturbance=disturbance,
                                     solver=opts.solver, duration_s=opts.duration, signals=signals.mode,
                                     controller=getattr(opts, "controller", "paper"),
+                                    claim_cache=getattr(opts, "claim_cache", None) or "on",
                                     speed_limits=getattr(opts, "speed_limits", None) or "obey",
                                     lat_accel=SpeedSettings.from_options(opts).lat_accel
                                     if SpeedSettings.from_options(opts).curves else 0.0))
@@ -485,9 +494,11 @@ def run_sumo(target: str, out: Path, opts) -> dict:
         settings = CosimSettings(tm=TMSettings(policy=tm, check=check, seed=seed), switching=switching,
                                  disturbance=disturbance, solver=opts.solver, seed=seed, duration_s=duration,
                                  signals=signals, controller=getattr(opts, "controller", "paper"),
-                                 speed=SpeedSettings.from_options(opts))
+                                 speed=SpeedSettings.from_options(opts),
+                                 claim_cache=summary["options"]["claim_cache"] == "on")
         observers = [HaltCounter()] + observers_for(out, getattr(opts, "log", None) or "none",
                                                     {"scenario": str(target), "seed": seed, **summary["options"]})
+        observers += list(observers_extra or [])
         observers.append(StreamingOutputs(out, dict(summary)))  # last: the row is complete by then
         peds = PedestrianRule(PedestrianSettings(enabled=getattr(opts, "pedestrians", None) != "ignore"),
                               walk_regions(net), settings.Ts)
@@ -544,6 +555,10 @@ def run_sumo(target: str, out: Path, opts) -> dict:
                 stop_reason=stop_reason(limit, figures["vehicles"], figures["vehicles_arrived"],
                                         figures["simulated_s"]),
                 rtf=round(sim.t * sim.settings.Ts / wall, 3) if wall > 0 else None)
+            if sim.claim_cache is not None:  # rows of current claims: offered, shifted, computed fresh
+                st = sim.claim_cache.stats
+                summary.update(claim_cache_offered=st.offered, claim_cache_reused=st.reused,
+                               claim_cache_fresh=st.fresh)
             if undrivable:
                 _report_undrivable(out, undrivable, begin)
                 summary["vehicles_total"] = figures["vehicles"] + len(undrivable)

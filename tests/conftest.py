@@ -28,6 +28,7 @@ SLOW_FIRST = (
     "tests/bridge/test_cosim.py::test_no_footprint_overlap_and_no_invariant_violation",
     "tests/bridge/test_sweep.py",
     "tests/bridge/test_sumo_cosim.py::test_small_grid_every_vehicle_arrives",
+    "tests/bridge/test_sumo_claim_cache.py",
     "tests/bridge/test_freeplane.py::test_jerk_model_follows_waypoints",
     "tests/bridge/test_sumo_scenarios.py",
     "tests/bridge/test_sumo_signals.py",

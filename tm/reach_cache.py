@@ -10,7 +10,9 @@ shifted ones where the premises of that inclusion are checked to hold; fresh cla
 A cached row is reused at step ``t + 1`` iff every one of these holds (else: fresh claims):
 
 * it was stored at step ``t`` (the step just before) for a vehicle of the same id and class;
-* the vehicle was not granted at ``t`` (a grant gives new claims; they are computed fresh);
+* the vehicle was not granted at ``t`` (a grant gives new claims; computed fresh), unless its
+  requested claims were committed with the grant (:meth:`ClaimCache.commit`): then they are its
+  claims in force, and its new waypoint, index and pad are the ones checked below;
 * its waypoint and segment heading are the stored ones (bit-for-bit);
 * its index dropped: ``min(l(t+1), N) <= max(min(l(t), N) - 1, 0)`` (the tube invariant);
 * its footprint padding (``body_pad`` of :func:`~tm.reach.reach_claims`, e.g. SUMO's bodies,
@@ -69,7 +71,9 @@ class _Entry:
     index: np.ndarray    # (n,) capped at the class's N
     pad: np.ndarray | None  # (n, ...) the footprint padding the claims were built with (None: none)
     claims: ReachClaims | None = None   # the claims handed out (in force for those not granted)
-    granted: np.ndarray | None = None
+    granted: np.ndarray | None = None   # granted rows whose claims in force are not held (fresh next step)
+    new: ReachClaims | None = None      # the granted rows' claims in force (their requested ones), K slots
+    new_pos: np.ndarray | None = None   # (n,) row of ``new`` of each row (-1: its claims are ``claims``)
 
 
 class ClaimCache:
@@ -201,6 +205,18 @@ class ClaimCache:
                 dst[:, -1] = g[:, -1]
             boxes[:, :, :-1] = g_b[:, :, 1:]
             boxes[:, :, -1] = g_b[:, :, -1]
+            if self._last.new is not None:  # rows granted at t - 1: their requested claims, shifted
+                q = self._last.new_pos[j[r]]
+                dst, q = r[q >= 0], q[q >= 0]
+                if len(dst):
+                    nw = self._last.new
+                    nb = nw.slot_boxes
+                    for a, g in ((lo, nw.lo), (hi, nw.hi)):
+                        a[dst, :-1] = g[q, 1:]
+                        a[dst, -1] = g[q, -1]
+                    for p in range(4):
+                        boxes[p, dst, :-1] = nb[p, q, 1:]
+                        boxes[p, dst, -1] = nb[p, q, -1]
         f = np.flatnonzero(~reuse)
         for c in dict.fromkeys(cls[f].tolist()):
             g = f[cls[f] == c]
@@ -220,18 +236,59 @@ class ClaimCache:
         self._pending = _Entry(t, ids, None, cls, X, centre, heading, index, pad, out)
         return out
 
-    def commit(self, granted: np.ndarray) -> None:
+    def commit(self, granted: np.ndarray, requesting: np.ndarray | None = None,
+               requested: ReachClaims | None = None, req_index: np.ndarray | None = None,
+               req_pad: np.ndarray | None = None) -> None:
         """Record the decision of the step of the last :meth:`current`: ``granted`` (n,) (e.g.
         ``decision.go``).  The claims in force of the vehicles not granted are the ones
-        :meth:`current` handed out (a decision keeps them); the granted ones are not reused."""
+        :meth:`current` handed out (a decision keeps them).
+
+        Without ``requested`` the granted ones are not reused (fresh claims next step).  With it,
+        their claims in force are their requested ones and are reused next step under the same
+        premises (their new waypoint, segment heading, index and pad are then the ones checked):
+        ``requesting`` (n,) the rows that requested (``granted`` among them), ``requested`` the
+        claims of those rows in their order (e.g. the ones the decision took, centred on the
+        requested waypoints), ``req_index`` (their requested indices) and ``req_pad`` (their pads,
+        in the shape of :meth:`current`'s, if the parts had pads).
+        """
         e = self._pending
         if e is None:
             self._last = None
             return
         granted = np.asarray(granted, dtype=bool)
-        if granted.shape != (len(e.ids),):
-            raise ValueError(f"ClaimCache.commit: granted must have shape ({len(e.ids)},), got {granted.shape}")
-        self._last = _Entry(e.t, e.ids, e.row, e.cls, e.X, e.centre, e.heading, e.index, e.pad, e.claims, granted)
+        n = len(e.ids)
+        if granted.shape != (n,):
+            raise ValueError(f"ClaimCache.commit: granted must have shape ({n},), got {granted.shape}")
+        if requested is None or not granted.any():
+            self._last = _Entry(e.t, e.ids, e.row, e.cls, e.X, e.centre, e.heading, e.index, e.pad, e.claims,
+                                granted)
+            self._pending = None
+            return
+        requesting = np.asarray(requesting, dtype=bool)
+        rq = np.flatnonzero(requesting)
+        if requesting.shape != (n,) or len(requested) != len(rq) or np.any(granted & ~requesting):
+            raise ValueError(f"ClaimCache.commit: requesting must be ({n},) bool covering granted, and requested "
+                             f"one row per requester ({int(requesting.sum())}), got {requesting.shape} and "
+                             f"{len(requested)}")
+        if req_index is None or len(req_index) != len(rq):
+            raise ValueError("ClaimCache.commit: req_index must give one index per requester")
+        if (req_pad is None) != (e.pad is None):
+            raise ValueError("ClaimCache.commit: req_pad must be given iff the current parts had pads")
+        g = np.flatnonzero(granted)
+        sub = np.flatnonzero(granted[rq])  # the granted rows among the requesters
+        new = pad_slots(requested.take(sub), self.K)
+        centre, heading, index = e.centre.copy(), e.heading.copy(), e.index.copy()
+        centre[g], heading[g] = new.centre, new.heading
+        cap = np.array([self.book.models[c].N for c in e.cls[g].tolist()], dtype=np.intp)
+        index[g] = np.minimum(np.asarray(req_index, dtype=np.intp)[sub], cap)
+        pad = e.pad
+        if pad is not None:
+            pad = pad.copy()
+            pad[g] = np.asarray(req_pad, dtype=float).reshape(len(rq), -1)[sub]
+        pos = np.full(n, -1, dtype=np.intp)
+        pos[g] = np.arange(len(g))
+        self._last = _Entry(e.t, e.ids, e.row, e.cls, e.X, centre, heading, index, pad, e.claims,
+                            np.zeros(n, dtype=bool), new, pos)
         self._pending = None
 
     # ------------------------------------------------------------------ the premises

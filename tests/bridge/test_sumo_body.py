@@ -111,6 +111,24 @@ def test_padding_zero_on_a_straight(net):
     np.testing.assert_allclose(table.pads(k, arc[k] - 25.0), 0.0, atol=1e-9)
 
 
+@pytest.mark.parametrize("edges", [LEFT, RIGHT, STRAIGHT])
+def test_padding_tables_are_the_reference_pads(net, edges):
+    """``PadTable.pads`` (per-waypoint suffix tables, built once per waypoint) returns the very
+    floats of the reference ``_pads`` (one window start at a time) for every waypoint and window
+    start, whatever the order of the lookups: window starts rising as a vehicle moves on, then
+    falling (a table rebuilt from the lower start), at and past the samples that count."""
+    r = _route(net, edges)
+    b = RouteBody(r, net, *TRUCK)
+    W, arc = r.waypoints, r.arc_length
+    table = b.pad_table(arc, W, _headings(W), (-40.0, -OFFSET_MAX_M), (1.2, OFFSET_MAX_M))
+    rng = np.random.default_rng(3)
+    for k in range(len(W)):
+        ups = np.sort(rng.uniform(arc[k] - 45.0, arc[k] + 30.0, 12))
+        for sg in np.concatenate([ups, ups[::-1][::3]]):
+            j0 = int(np.searchsorted(table.sig, sg, side="left"))
+            np.testing.assert_array_equal(table.pads(k, sg), table._pads(k, j0), err_msg=f"k={k} sigma={sg}")
+
+
 def _planned(vid, edges):
     return PlannedVehicle(vid, "truck", 0.0, tuple(edges), None, None, "truck", *TRUCK)
 

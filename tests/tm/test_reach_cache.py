@@ -136,6 +136,74 @@ def test_shifted_claims_contain_fresh_ones(lcs, classes, seed, policy, sign, p_s
     assert cache.stats.reused > 0
 
 
+@hsettings(max_examples=25, deadline=None)
+@given(classes=st.lists(st.sampled_from(URBAN), min_size=1, max_size=5), seed=st.integers(0, 2 ** 31),
+       policy=st.sampled_from(["random", "adversarial", "push"]), sign=st.sampled_from([-1.0, 1.0]),
+       p_switch=st.floats(0.2, 0.6))
+def test_granted_claims_committed_are_shifted_and_contain_fresh_ones(lcs, classes, seed, policy, sign, p_switch):
+    """As above, but every grant commits the granted vehicles' requested claims (their claims in
+    force, :meth:`ClaimCache.commit` with ``requested``): at every step the cache's claims contain
+    the fresh claims of the same state (slot by slot, GEOMETRY_TOL: the plant's and the closed-form
+    reach's round-off), their slot boxes are those of their boxes, no position leaves slot 1 of the
+    claims in force the step before; no row is computed fresh for a grant, and some row granted the
+    step before was shifted (the fast path was taken)."""
+    rng = np.random.default_rng(seed)
+    book = _Book(lcs)
+    cache = ClaimCache(book)
+    n = len(classes)
+    X, C, H, L = _random_fleet(lcs, classes, rng)
+    assume(all(L[v] <= lcs[c].ctl.N for v, c in enumerate(classes)))
+    ids = [f"v{v}" for v in range(n)]
+    length = np.array([lcs[c].vclass.length for c in classes])
+    width = np.array([lcs[c].vclass.width for c in classes])
+    inforce, granted_before, shifted_after_grant, grants = None, np.zeros(n, dtype=bool), 0, 0
+    for t in range(30):
+        if inforce is not None:
+            assert not tube_escapes(inforce, X[:, :2], length, width).any(), t
+        parts = [(c, [ids[v]], X[[v]], C[[v]], H[[v]], L[[v]]) for v, c in enumerate(classes)]
+        got = cache.current(t, parts)
+        assert _contains(got, book.fresh(parts)), t
+        assert np.array_equal(got.slot_boxes, slot_aabb(got.centre, got.heading, got.lo, got.hi))
+        shifted_after_grant += int((cache.last_reused & granted_before).sum())
+        C0 = C.copy()
+        granted = _switch_at_random(lcs, classes, X, C, H, L, rng, p_switch)
+        g = np.flatnonzero(granted)
+        requested = book.fresh([(classes[v], [ids[v]], X[[v]], C[[v]], H[[v]], L[[v]]) for v in g]) if len(g) \
+            else None
+        inforce = got if not len(g) else ReachClaims.concat(*[
+            requested.take([list(g).index(v)]) if granted[v] else got.take([v]) for v in range(n)])
+        assert np.array_equal(C0[~granted], C[~granted])
+        cache.commit(granted, granted, requested, L[granted])
+        granted_before = granted
+        _step_fleet(lcs, classes, X, C, H, L, rng, policy, sign)
+        grants += int(granted.sum()) if t < 29 else 0
+    assert cache.stats.fresh_by_reason["granted"] == 0
+    assume(grants > 0)
+    assert shifted_after_grant > 0
+
+
+def test_commit_with_requested_claims_checks_its_rows(lcs):
+    """Requested claims with a wrong number of rows, a grant outside ``requesting`` or a missing index:
+    a clear error naming ClaimCache.commit."""
+    lc = lcs["car"]
+    book = _Book({"car": lc})
+    cache = ClaimCache(book)
+    ctl = lc.ctl
+    C = np.array([[ctl.authority.s_ma - 6.0, 0.0], [100.0, 0.0]])
+    X = np.c_[C, np.zeros((2, 2))]
+    H = np.zeros(2)
+    L = ctl.index(X, C, H)
+    parts = [("car", ["a", "b"], X, C, H, L)]
+    cache.current(0, parts)
+    req = book.fresh([("car", ["a"], X[:1], C[:1], H[:1], L[:1])])
+    go = np.array([True, False])
+    for bad in [dict(requesting=go, requested=book.fresh(parts), req_index=L),
+                dict(requesting=np.array([False, True]), requested=req, req_index=L[:1]),
+                dict(requesting=go, requested=req, req_index=None)]:
+        with pytest.raises(ValueError, match="ClaimCache.commit"):
+            cache.commit(go, **bad)
+
+
 def test_each_reason_for_fresh_claims_fires(lcs):
     """New vehicle, a step without commit (stale), a grant, a moved waypoint, an index that did not
     drop and a state that jumped further than one step of physics each give fresh claims; the rest reuse."""
