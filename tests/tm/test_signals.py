@@ -235,3 +235,18 @@ def test_commit_point_is_the_first_rest_front_past_the_line():
     commit, past = book.timing_of(["a"])
     assert commit.tolist() == [6] and past.tolist() == [0.5]
     assert book.timing_of(["a", "b"]) is None   # b registered without the rest lead: no timing
+
+
+@settings(max_examples=200, deadline=None)
+@given(gap=st.floats(0.1, 80.0), past=st.floats(0.1, 6.0), v=st.floats(0.0, 16.0), cap=st.floats(1.0, 16.0),
+       to_red=st.floats(0.0, 30.0), letter=st.sampled_from("GgsoOyY"))
+def test_a_granted_crossing_reaches_the_line_before_red_under_the_tracked_profile(gap, past, v, cap, to_red,
+                                                                                  letter):
+    """Safety claim of the rule: whatever the non-red letter, a switch of the crossing chain that
+    stays granted has its front at the line (tracked profile, nothing further granted) at least
+    ``red_margin_s`` before red; withheld ones are the late ones or the yellow-with-room ones."""
+    ok = _timed(letter, k=5, bound=5, commit=6, gap=gap, speed=v, to_red=to_red, past=past, cap=cap)
+    t = float(time_to_line(gap, gap + past, v, cap, OBEY.accel_floor, 2.5))
+    late = t + OBEY.red_margin_s > to_red
+    room = letter in "yY" and v * v <= 2.0 * OBEY.comfort_decel * gap
+    assert ok == (not late and not room)
