@@ -33,16 +33,24 @@ What each counter checks (see ``SAFETY.md``):
 ``body_window_exits``
     vehicle-steps (movement-authority mode) whose position lay beyond the stretch of its
     waypoint's frame for which SUMO's body padding was computed (``bridge.sumo_body.AHEAD_M``).
+``red_violations``
+    stop lines a front bumper crossed while their link was red (``tm.signals``).  Judged when
+    the run obeyed the lights (``options.signals`` not ``ignore``): with ``--signals ignore``
+    (the TM-only, AIM-style mode) passing reds is the mode's point, so the counter is reported
+    but does not make the run unsafe.
 """
 
 from __future__ import annotations
 
-__all__ = ["SAFETY_COUNTERS", "UNSAFE_EXIT", "verdict"]
+__all__ = ["SAFETY_COUNTERS", "SIGNAL_COUNTERS", "UNSAFE_EXIT", "verdict"]
 
 #: Every safety counter a summary may hold, in the order reports list them.
 SAFETY_COUNTERS = ("collisions_sumo", "collisions_world", "collisions_geometric", "footprint_overlaps",
                    "claim_violations", "invariant_violations", "constraint_violations", "pedestrian_conflicts",
-                   "tube_escapes", "pose_mismatches", "body_window_exits")
+                   "tube_escapes", "pose_mismatches", "body_window_exits", "red_violations")
+
+#: Counters judged only when the run obeyed the traffic lights (``options.signals`` != ``ignore``).
+SIGNAL_COUNTERS = ("red_violations",)
 
 #: Exit code of ``muvsim run`` when a complete run's safety counters fired.
 UNSAFE_EXIT = 3
@@ -51,7 +59,10 @@ UNSAFE_EXIT = 3
 def verdict(summary: dict) -> dict:
     """``{"safe": bool, "safety_violations": {counter: count}}`` of a summary's counters.
 
-    Counters missing from ``summary`` (or None) are not judged.
+    Counters missing from ``summary`` (or None) are not judged, nor :data:`SIGNAL_COUNTERS`
+    when ``summary["options"]["signals"]`` is ``"ignore"``.
     """
-    fired = {k: int(summary[k]) for k in SAFETY_COUNTERS if summary.get(k)}
+    ignore = (summary.get("options") or {}).get("signals") == "ignore"
+    fired = {k: int(summary[k]) for k in SAFETY_COUNTERS
+             if summary.get(k) and not (ignore and k in SIGNAL_COUNTERS)}
     return {"safe": not fired, "safety_violations": fired}

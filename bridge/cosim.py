@@ -51,7 +51,7 @@ from tm.pedestrians import STRIPING_SPEED_FACTOR, PedestrianRule, footprint_cont
 from tm.crossing_gate import CrossingGate
 from tm.monitor import Monitor
 from tm.settings import TMSettings
-from tm.signals import SignalBook, SignalSettings, StopLines, withhold as signal_withhold
+from tm.signals import LineTiming, SignalBook, SignalSettings, StopLines, withhold as signal_withhold
 
 #: Valid values of :attr:`CosimSettings.controller`.
 CONTROLLERS = ("paper", "authority")
@@ -396,11 +396,28 @@ class Cosim:
         k, speed, (row, bound, s_line, slot, front) = self._signal_lines(state.ids, state.centre, state.heading,
                                                                          state.length)
         req, held = signal_withhold(self.settings.signals, state.requesting, k, row, bound,
-                                    self._link_state[slot], s_line - front[row], speed)
+                                    self._link_state[slot], s_line - front[row], speed,
+                                    self._line_timing(state.ids, slot))
         self.signal_book.withheld += int(held.sum())
         # vehicles standing at a red give their junction tokens back (liveness, tm.junctions)
         self.junctions.give_back([state.ids[i] for i in np.flatnonzero(held).tolist()])
         return replace(state, requesting=req)
+
+    def _line_timing(self, ids, slot: np.ndarray) -> LineTiming | None:
+        """Authority mode: the time-to-red rule's inputs (:class:`tm.signals.LineTiming`), the time
+        until each link is red read from the world (None in paper mode or without a schedule)."""
+        read = getattr(self.world, "link_time_to_red", None)
+        if not self.authority or read is None:
+            return None
+        got = self.signal_book.timing_of(ids)
+        to_red = read()
+        if got is None or to_red is None:
+            return None
+        live = [g for g in self.groups.values() if g.ids]
+        cap = np.concatenate([g.cap for g in live])
+        decel = np.concatenate([np.full(len(g.ids), g.ctl.authority.decel) for g in live])
+        return LineTiming(commit=got[0], rest_past=got[1], time_to_red=np.asarray(to_red)[slot], v_cap=cap,
+                          decel=decel)
 
     def _peds(self) -> tuple[list, np.ndarray]:
         """Persons' ids and positions from the world (none if it has no pedestrians)."""
@@ -823,7 +840,8 @@ class Cosim:
             self.records[sp.id].admitted_s = t_s
             if sp.stop_lines is not None:
                 reach = self.junctions.classes[sp.vclass].hold + 0.5 * g.vclass.length
-                self.signal_book.add(sp.id, sp.stop_lines, reach)
+                rest_lead = 0.5 * g.vclass.length - g.ctl.settings.standoff if self.authority else None
+                self.signal_book.add(sp.id, sp.stop_lines, reach, rest_lead)
             self.world.insert(sp, g.vclass)
             n += 1
         if n:

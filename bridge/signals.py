@@ -9,6 +9,16 @@ segment on the incoming lane, or the lane end projected on the polyline, whichev
 first).  Every ``(tls, linkIndex)`` gets a *slot* (:class:`LinkSlots`); each step
 :meth:`LinkSlots.states` reads every light in use once (``getRedYellowGreenState``) and returns
 one state byte per slot, for :mod:`tm.signals`.  SUMO keeps running its own signal programs.
+
+:meth:`LinkSlots.time_to_red` reads, per light, its program, phase and next switch, and from the
+program's phases (read once per program) the time until each link's state is red (``r``, ``R``,
+``u``): the current phase's remaining time, then each later phase's ``minDur`` (its duration in
+a static program; an actuated phase lasts at least that long), 0 when red now, ``inf`` when no
+phase of the cycle is red for it.  The current phase of an actuated program is taken to last
+until ``getNextSwitch`` (SUMO prolongs it from there or not).  A phase with several ``next``
+phases ends the look-ahead there: red is assumed to follow (conservative: the rule then only holds
+vehicles back).  A program SUMO does not list (a state set over TraCI, ``online``) has no
+schedule: ``inf``, the state letter alone decides (the rule before issue 12).
 """
 
 from __future__ import annotations
@@ -18,7 +28,31 @@ import numpy as np
 from bridge.waypoints import NetGeometry, RouteWaypoints, _arc
 from tm.signals import StopLines
 
-__all__ = ["LinkSlots", "route_stop_lines"]
+__all__ = ["LinkSlots", "route_stop_lines", "link_time_to_red"]
+
+_RED = frozenset("rRu")
+
+
+def link_time_to_red(phases: list, phase: int, remaining: float, link: int) -> float:
+    """Time (s) until ``link`` is red in a program ``phases`` (``(state, minDur, next)`` per phase),
+    the current phase ``phase`` ending in ``remaining`` s (module notes)."""
+    if not 0 <= phase < len(phases):
+        return 0.0
+    if phases[phase][0][link] in _RED:
+        return 0.0
+    t, p = max(float(remaining), 0.0), phase
+    for _ in range(len(phases)):
+        nxt = phases[p][2]
+        if len(nxt) > 1:
+            return t
+        p = nxt[0] if nxt else (p + 1) % len(phases)
+        if not 0 <= p < len(phases):
+            return t
+        state, min_dur, _ = phases[p]
+        if state[link] in _RED:
+            return t
+        t += max(min_dur, 0.0)
+    return float("inf")
 
 
 class LinkSlots:
@@ -29,6 +63,7 @@ class LinkSlots:
         self.tls_ids: list[str] = []
         self._tls_of: list[int] = []
         self._link: list[int] = []
+        self._programs: dict[str, dict] = {}  # tls -> programID -> phases (time_to_red)
 
     def __len__(self) -> int:
         return len(self.slot)
@@ -61,6 +96,26 @@ class LinkSlots:
         buf = np.frombuffer("".join(strings).encode("ascii"), dtype=np.uint8)
         offset = np.concatenate([[0], np.cumsum(lengths)[:-1]])
         return buf[offset[tls_of] + link]
+
+    def time_to_red(self, adapter) -> np.ndarray:
+        """Per slot, the time (s) until its link turns red (module notes; programs read once)."""
+        if not self.slot:
+            return np.zeros(0)
+        sched = adapter.tls_schedule(self.tls_ids)
+        out = np.empty(len(self._link))
+        for s, (ti, link) in enumerate(zip(self._tls_of, self._link)):
+            tls = self.tls_ids[ti]
+            program, phase, remaining = sched[ti]
+            progs = self._programs.get(tls)
+            if progs is None or program not in progs:
+                progs = self._programs[tls] = adapter.tls_programs(tls)
+                progs.setdefault(program, None)  # not listed: no schedule (read once)
+            phases = progs.get(program)
+            if phases is None or any(link >= len(p[0]) for p in phases):
+                out[s] = np.inf if phases is None else max(remaining, 0.0)
+                continue
+            out[s] = link_time_to_red(phases, phase, remaining, link)
+        return out
 
 
 def _project(poly: np.ndarray, parc: np.ndarray, q: np.ndarray, j0: int, j1: int) -> float:

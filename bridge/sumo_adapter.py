@@ -612,6 +612,26 @@ class SumoAdapter:
         return [self._call(f"trafficlight.getRedYellowGreenState({t!r})", tl.getRedYellowGreenState, t)
                 for t in tls_ids]
 
+    def tls_schedule(self, tls_ids: Sequence[str]) -> list[tuple[str, int, float]]:
+        """Per traffic light ``(programID, phase index, remaining s)``: ``trafficlight.getProgram``,
+        ``getPhase`` and ``getNextSwitch`` less ``simulation.getTime`` (SUMO's documented way to the
+        remaining duration of the current phase)."""
+        api = self._need("tls_schedule")
+        tl = api.trafficlight
+        now = float(self._call("simulation.getTime", api.simulation.getTime))
+        return [(str(self._call(f"trafficlight.getProgram({t!r})", tl.getProgram, t)),
+                 int(self._call(f"trafficlight.getPhase({t!r})", tl.getPhase, t)),
+                 float(self._call(f"trafficlight.getNextSwitch({t!r})", tl.getNextSwitch, t)) - now)
+                for t in tls_ids]
+
+    def tls_programs(self, tls: str) -> dict[str, list[tuple[str, float, tuple[int, ...]]]]:
+        """A traffic light's programs (``trafficlight.getAllProgramLogics``): programID -> its phases
+        as ``(state, minDur s, next phase indices)``."""
+        tl = self._need("tls_programs").trafficlight
+        logics = self._call(f"trafficlight.getAllProgramLogics({tls!r})", tl.getAllProgramLogics, tls)
+        return {str(lg.programID): [(str(ph.state), float(ph.minDur), tuple(int(n) for n in ph.next))
+                                    for ph in lg.phases] for lg in logics}
+
     def departed_ids(self) -> tuple[str, ...]:
         """Vehicles SUMO inserted in the last step (the ones admitted before it)."""
         return self._departed

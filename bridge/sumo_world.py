@@ -230,6 +230,10 @@ class SumoWorld:
         """SUMO's state letter of every signalised link in use, one byte per slot (None: no signals)."""
         return self.slots.states(self.adapter) if self.slots else None
 
+    def link_time_to_red(self) -> np.ndarray | None:
+        """Per slot, the time (s) until its link turns red (:meth:`bridge.signals.LinkSlots.time_to_red`)."""
+        return self.slots.time_to_red(self.adapter) if self.slots else None
+
     def finish(self, vid: str) -> None:
         self._sent.pop(vid, None)
         self._held.discard(vid)

@@ -9,6 +9,8 @@ per direction), the demand four crossing streams through it.
 
 import json
 
+import pytest
+
 import bridge.sumo_world as sumo_world
 from bridge.cli import main
 
@@ -175,3 +177,59 @@ def test_game_corridor_holds_only_at_sumos_reds_and_goes_on_green(tmp_path, monk
     assert still == {}, still
     assert watch.crossed_red == [] and s["red_violations"] == 0
     assert s["collisions_sumo"] == 0 and s["collisions_geometric"] == 0 and s["invariant_violations"] == 0
+
+
+LONG_ROUTE = """<routes><vType id="car" length="5" width="1.8"/><route id="e" edges="A1B1 B1C1"/>
+  <vehicle id="late" type="car" depart="{depart}" route="e"/></routes>"""
+
+
+@pytest.fixture(scope="module")
+def end_of_green_cfg(tmp_path_factory):
+    """A 3 x 3 grid, 200 m edges (room to reach 13.9 m/s), a static light at B1 (cycle 40 s,
+    3 s yellow: east 17 s green from 0 s), one car east through it departing at 24.6 s: it asks
+    for the switch past the line on green just before yellow, 3.6 s out (before issue 12's fix it
+    entered on red: depart times 24.6 and 24.8 s, 1 crossing each, 24.4 s none; measured)."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    d = tmp_path_factory.mktemp("tls_end_of_green")
+    subprocess.run([str(Path(sys.executable).parent / "netgenerate"), "--grid", "--grid.x-number", "3",
+                    "--grid.y-number", "3", "--grid.length", "200", "--default.lanenumber", "1", "--tls.set", "B1",
+                    "--tls.cycle.time", "40", "--tls.yellow.time", "3", "-o", str(d / "net.net.xml")],
+                   check=True, capture_output=True)
+    (d / "late.rou.xml").write_text(LONG_ROUTE.format(depart=24.6))
+    cfg = d / "late.sumocfg"
+    cfg.write_text('<configuration><input><net-file value="net.net.xml"/><route-files value="late.rou.xml"/>'
+                   '</input><time><begin value="0"/><end value="150"/><step-length value="0.1"/></time>'
+                   '</configuration>')
+    return cfg
+
+
+def _run_late(cfg, out, monkeypatch):
+    watch = RedWatch()
+    base = sumo_world.observers_for
+    monkeypatch.setattr(sumo_world, "observers_for", lambda *a, **k: base(*a, **k) + [watch])
+    rc = main(["run", str(cfg), "--out", str(out), "--quiet", "--log", "none", "--duration", "90",
+               "--controller", "authority"])
+    return rc, json.loads((out / "summary.json").read_text()), watch
+
+
+def test_authority_car_at_the_end_of_green_waits_instead_of_entering_on_red(end_of_green_cfg, tmp_path,
+                                                                          monkeypatch):
+    """Issue 12: with the time-to-red rule the car is held at the line and crosses on the next
+    green (SUMO's view and ``red_violations`` 0, safe); without it (the letter alone, as before)
+    it enters on red, SUMO sees it, the counter fires and the run is flagged unsafe (exit 3)."""
+    import bridge.cosim as cosim
+    from analysis.safety import UNSAFE_EXIT
+
+    rc, s, watch = _run_late(end_of_green_cfg, tmp_path / "rule", monkeypatch)
+    assert rc == 0 and s["complete"], s.get("error")
+    assert watch.crossed > 0 and watch.crossed_red == [] and s["red_violations"] == 0
+    assert s["signal_withheld"] > 0 and s["vehicles_arrived"] == 1 and s["safe"] is True, s
+
+    monkeypatch.setattr(cosim.Cosim, "_line_timing", lambda self, ids, slot: None)  # the rule off
+    rc, s, watch = _run_late(end_of_green_cfg, tmp_path / "letter_only", monkeypatch)
+    assert s["complete"], s.get("error")
+    assert len(watch.crossed_red) == 1 and s["red_violations"] == 1
+    assert rc == UNSAFE_EXIT and s["safe"] is False and s["safety_violations"] == {"red_violations": 1}
