@@ -178,6 +178,7 @@ class AuthorityGate(JunctionGate):
         #: over the run: requests withheld because their stop point would stand in a holder's path
         #: (:meth:`_keep_out`)
         self.wide_withheld = 0
+        self._wide: dict = {}  # (vehicle, zone, waypoint, first) -> its wide path (:meth:`_wide_path`)
         #: how far a requester's standing box may lie beyond its current claim box (m): its stop
         #: point moves by at most δ, plus the largest hold box and a padding allowance
         self.guard_margin = max((c.delta + c.hold + 0.5 * np.hypot(c.length, c.width) for c in self.classes.values()),
@@ -311,13 +312,20 @@ class AuthorityGate(JunctionGate):
         plus ``W/2`` across, the route's padding there).  None when the route does not leave the
         guard from there (it arrives inside) or the stop point is past the slot."""
         W, H, k = fleet.route(row)
+        key = (fleet.ids[row], z, k, first)
+        if key in self._wide:
+            return self._wide[key]
+        if len(self._wide) > 100_000:  # stale keys: start over
+            self._wide.clear()
         span = self._span_of(fleet, row, z, k + 1) or self._span_of(fleet, row, z, k)
         if span is None or not span[2] or first > span[1]:
+            self._wide[key] = None
             return None
         idx = np.arange(max(first, 0), span[1] + 1)
         lo, hi = self.classes[fleet.family[row]].claim_box(fleet.pad(row, idx), H[idx],
                                                           H[np.minimum(idx + 1, len(H) - 1)])
-        return W[idx] + lo, W[idx] + hi
+        self._wide[key] = found = (W[idx] + lo, W[idx] + hi)
+        return found
 
     def _on_route(self, fleet: JunctionFleet, row: int, j: np.ndarray, ahead: int = 0) -> np.ndarray:
         """Which rows ``j`` have their requested stop point (``k + ahead``) on row ``row``'s route
