@@ -355,7 +355,7 @@ class JunctionGate:
                 if meet and not follows:
                     blocked.append((key_q, lo_q, hi_q))
                     continue
-                if blocked_intr[q] or not self._room(fleet, pos, int(wrow[P[q]]), z):
+                if blocked_intr[q]:
                     continue
                 holders[cid[q]] = (key_q, lo_q, hi_q)
                 allowed[P[q]] = True
@@ -363,11 +363,6 @@ class JunctionGate:
                 if cid[q] in self.given_back:
                     self.given_back[cid[q]].discard(z)
         return allowed
-
-    def _room(self, fleet: JunctionFleet, pos: dict, row: int, z: int) -> bool:
-        """Whether row ``row`` has room beyond the exit slot rule to take zone ``z``'s token (always,
-        here; :class:`tm.authority_gate.AuthorityGate`: room for its moving claims' width)."""
-        return True
 
     def _follows(self, fleet: JunctionFleet, pos: dict, row: int, z: int, leaders: list) -> bool:
         """Whether row ``row`` may take zone ``z``'s token although its corridor meets the corridors

@@ -254,25 +254,6 @@ def test_a_waiter_beside_the_exit_road_stays_out_of_the_holders_path():
     assert gate.wide_withheld > 0 and not any(gate.holders[0])
 
 
-def test_a_holder_needs_room_for_its_claims_width_beside_its_exit_road():
-    """The hand-out half of the rule: B (the car of the test above) already stands at its entry
-    line (y = 13) beside T's exit slot when T asks for the token: T does not get it (its claims up
-    the north arm would meet B's standing box); B, asking next, does; T gets it once B's claim has
-    left T's path (B through, its claim out of the guard)."""
-    routes = {"T": _right_turn_east_to_north(), "B": _route(*SOUTH)}
-    family, reach = {"T": "truck", "B": "narrow"}, {"truck": TRUCK, "narrow": NARROW}
-    gate = AuthorityGate([J], {"narrow": NARROW, "truck": TRUCK})
-    t_in = int(gate.intervals(Scene({}, routes={"T": routes["T"]}, family=family, reach=reach).fleet(), 0)[1][0])
-    kb = int(gate.intervals(Scene({}, routes={"B": routes["B"]}, family=family, reach=reach).fleet(), 0)[1][0]) - 1
-    assert abs(routes["B"][0][kb, 1] - 13.0) < 1e-9
-    scene = Scene({}, k={"T": t_in - 1, "B": kb}, idle="B", routes=routes, family=family, reach=reach)
-    assert scene.withhold(gate, t=0) == set() and _holders(gate) == set()
-    scene = Scene({}, k={"T": t_in - 1, "B": kb}, routes=routes, family=family, reach=reach)
-    assert scene.withhold(gate, t=1) == {"B"} and _holders(gate) == {"B"}
-    k, _ = _toy_traffic(gate, routes, family, reach, {"T": t_in - 1, "B": kb}, steps=160)
-    assert routes["T"][0][k["T"], 1] > 40.0 and routes["B"][0][k["B"], 1] < -20.0, k
-
-
 def test_without_the_token_the_stop_point_stays_before_the_entry_line():
     """A holds the token; B crosses A's corridor.  B moves its stop point waypoint by waypoint up
     to the last one whose hold box misses the guard (the entry line less T^0 and L/2), even with
