@@ -518,8 +518,14 @@ class Cosim:
             new_lo = new_hi = np.zeros((0, 2))
             if len(r):
                 new_lo, new_hi = new.aabb()
+        fn = getattr(self.world, "claim_pads", None) if self.authority else None
+        pads = None
+        if fn is not None:  # the claims' body padding along a route (SUMO: bridge.sumo_body)
+            def pads(row, idx, ids=state.ids):
+                p = fn([ids[row]] * len(idx), idx)
+                return np.zeros((len(idx), 4)) if p is None else p
         fleet = JunctionFleet(state.ids, state.family, cur_lo, cur_hi,
-                              tuple((g.W, g.H, g.k) for g in self.groups.values() if g.ids))
+                              tuple((g.W, g.H, g.k) for g in self.groups.values() if g.ids), pads)
         req = self.junctions.withhold(self.t, fleet, state.requesting, new_lo, new_hi)
         self._junction_fleet = fleet
         if not len(r):

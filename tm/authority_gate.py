@@ -22,6 +22,17 @@ changes is where they apply:
   the token the stop point may move up to it (and on, outside the guard, without one); the token
   is handed out only with room there for the stopped vehicle: no other vehicle's claim on the
   slot's hold box;
+* **room for the claims' width** (:meth:`AuthorityGate._keep_out`):
+  the exit slot's hold box is narrower than the claims a holder makes on its way there (the
+  claims' across half-width plus ``W/2`` and the body padding across, ``T^0 + L/2`` past the slot
+  along), and the opposite approach's first waiter stands at its entry line right beside the exit
+  slot: a bus holder's claims up its exit road met that car's standing box, the traffic manager
+  denied them, and the car waited for the bus's token (issue 12, ``grid`` seed 1: bus 85 / car 71
+  at A0, bus 93 / car 79 at B2).  So while the token is held nobody without it moves its stop
+  point so that its standing box enters the holder's remaining wide path (a vehicle already
+  standing there at the hand-out is not covered).  Kept in the gate rather than moving every entry line back by
+  the largest such reach (about ``L + 2 T^0 + pad + δ``, 16 m for a bus): only the approaches
+  beside a holder's exit road wait, and only while it holds the token;
 * **corridor**: what the vehicle can hold while its stop point moves from where it is to the
   exit slot: boxes around those waypoints, ``δ/2 + T^0`` along plus ``L/2`` (a position lies
   within ``δ/2`` of a waypoint), ``T^0`` plus ``W/2`` across.  Across, this is the hold region,
@@ -51,6 +62,24 @@ from controllers.authority import AuthorityTables
 from tm.junctions import JunctionFleet, JunctionGate
 
 __all__ = ["AuthorityReach", "AuthorityGate"]
+
+
+
+def _world_box(a: float, b: float, pad: np.ndarray, *headings: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Offsets ``(lo, hi)`` (n, 2) from the waypoints of the world bounding box of a segment-frame
+    box ``±a`` along, ``±b`` across, padded one-sided by ``pad`` (n, 4: back, front, right, left;
+    the frame's ``y`` points left), hulled over the given headings."""
+    pad = np.asarray(pad, dtype=float)
+    cx, cy = 0.5 * (pad[:, 1] - pad[:, 0]), 0.5 * (pad[:, 3] - pad[:, 2])
+    ea, eb = a + 0.5 * (pad[:, 0] + pad[:, 1]), b + 0.5 * (pad[:, 2] + pad[:, 3])
+    lo = hi = None
+    for h in headings:
+        c, s = np.cos(h), np.sin(h)
+        mid = np.stack([c * cx - s * cy, s * cx + c * cy], axis=1)
+        e = np.stack([np.abs(c) * ea + np.abs(s) * eb, np.abs(s) * ea + np.abs(c) * eb], axis=1)
+        lo = mid - e if lo is None else np.minimum(lo, mid - e)
+        hi = mid + e if hi is None else np.maximum(hi, mid + e)
+    return lo, hi
 
 
 def _world_half(a: float, b: float, *headings: np.ndarray) -> np.ndarray:
@@ -120,6 +149,16 @@ class AuthorityReach:
         ``T^0`` along plus ``L/2``, the claims' across half-width plus ``W/2`` across."""
         return _world_half(self.hold + 0.5 * self.length, self.across + 0.5 * self.width, *headings)
 
+    def claim_box(self, pad: np.ndarray, *headings: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`claim_half` padded one-sided by ``pad`` (n, 4: back, front, right, left): offsets
+        ``(lo, hi)`` (n, 2) from the waypoints of what a claim with its stop point there covers."""
+        return _world_box(self.hold + 0.5 * self.length, self.across + 0.5 * self.width, pad, *headings)
+
+    def hold_box(self, pad: np.ndarray, *headings: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`hold_half` padded one-sided by ``pad``: offsets ``(lo, hi)`` (n, 2) of the box of a
+        vehicle at rest at its stop point (its standing claim)."""
+        return _world_box(self.hold + 0.5 * self.length, self.hold_y + 0.5 * self.width, pad, *headings)
+
     def half_extent(self, *headings: np.ndarray) -> np.ndarray:
         """World half extents (n, 2) of a corridor box around a waypoint at the headings: the hold
         box ``T^0 ⊕ footprint`` of every stop point within ``δ/2`` of it (module notes)."""
@@ -147,6 +186,14 @@ class AuthorityGate(JunctionGate):
         super().__init__(zones, classes)
         #: vehicle id -> its route's intervals through the guards (:meth:`intervals`)
         self._spans: dict[str, tuple] = {}
+        #: over the run: requests withheld because their stop point would stand in a holder's path
+        #: (:meth:`_keep_out`)
+        self.wide_withheld = 0
+        self._wide: dict = {}  # (vehicle, zone, waypoint, first) -> its wide path (:meth:`_wide_path`)
+        #: how far a requester's standing box may lie beyond its current claim box (m): its stop
+        #: point moves by at most δ, plus the largest hold box and a padding allowance
+        self.guard_margin = max((c.delta + c.hold + 0.5 * np.hypot(c.length, c.width) for c in self.classes.values()),
+                                default=0.0) + 10.0
 
     @staticmethod
     def guard_radius(classes) -> float:
@@ -267,6 +314,94 @@ class AuthorityGate(JunctionGate):
         near = near[~np.isin(near, [row] + rows)]  # the queue's own claims do not count
         c_lo, c_hi = fleet.claim_lo[near], fleet.claim_hi[near]
         return not np.any(np.all((lo[:, None, :] <= c_hi[None]) & (hi[:, None, :] >= c_lo[None]), axis=2))
+
+    # ------------------------------------------------------------------ the moving claims' width
+    def _wide_path(self, fleet: JunctionFleet, row: int, z: int, first: int):
+        """Boxes ``(lo, hi)`` (m, 2) that hold every claim of row ``row`` while its stop point moves
+        from waypoint ``first`` to zone ``z``'s exit slot and rests there: at each of those waypoints
+        :meth:`AuthorityReach.claim_box` (``T^0`` plus ``L/2`` along, the claims' across half-width
+        plus ``W/2`` across, the route's padding there).  None when the route does not leave the
+        guard from there (it arrives inside) or the stop point is past the slot."""
+        W, H, k = fleet.route(row)
+        key = (fleet.ids[row], z, k, first)
+        if key in self._wide:
+            return self._wide[key]
+        if len(self._wide) > 100_000:  # stale keys: start over
+            self._wide.clear()
+        span = self._span_of(fleet, row, z, k + 1) or self._span_of(fleet, row, z, k)
+        if span is None or not span[2] or first > span[1]:
+            self._wide[key] = None
+            return None
+        idx = np.arange(max(first, 0), span[1] + 1)
+        lo, hi = self.classes[fleet.family[row]].claim_box(fleet.pad(row, idx), H[idx],
+                                                          H[np.minimum(idx + 1, len(H) - 1)])
+        self._wide[key] = found = (W[idx] + lo, W[idx] + hi)
+        return found
+
+    def _on_route(self, fleet: JunctionFleet, row: int, j: np.ndarray, ahead: int = 0) -> np.ndarray:
+        """Which rows ``j`` have their requested stop point (``k + ahead``) on row ``row``'s route
+        (within ``0.6 δ`` of one of its waypoints: the same lanes, ahead of it or behind)."""
+        W = fleet.route(row)[0]
+        out = np.zeros(len(j), dtype=bool)
+        for n, jj in enumerate(j.tolist()):
+            Wj, _, kj = fleet.route(jj)
+            p = Wj[min(kj + ahead, len(Wj) - 1)]
+            out[n] = np.linalg.norm(W - p, axis=1).min() <= 0.6 * self.classes[fleet.family[jj]].delta
+        return out
+
+    def withhold(self, t: int, fleet: JunctionFleet, requesting: np.ndarray, new_lo: np.ndarray,
+                 new_hi: np.ndarray) -> np.ndarray:
+        """:meth:`JunctionGate.withhold`, then the holders' paths kept clear (:meth:`_keep_out`)."""
+        req = super().withhold(t, fleet, requesting, new_lo, new_hi)
+        return self._keep_out(fleet, req)
+
+    def _keep_out(self, fleet: JunctionFleet, req: np.ndarray) -> np.ndarray:
+        """Withhold the requests of vehicles without zone ``z``'s token whose requested stop point's
+        standing box (:meth:`AuthorityReach.hold_box`, padded) meets a ``z`` holder's
+        :meth:`_wide_path` from its stop point on while their current one does not, unless they are
+        on the holder's route (its queue): nobody comes to stand in claims a holder still has to
+        make to leave the guard.  (It does not help against one that stood there before the token
+        was handed out: a hand-out rule refusing the token then, tried on ``grid`` seed 1, refused
+        every waiter of a busy junction, each standing in another's wide path: 94 of 150 arrived.)"""
+        ids = fleet.ids
+        pos = dict(zip(ids, range(len(ids))))
+        r = np.flatnonzero(req)
+        if not len(r):
+            return req
+        out = req.copy()
+        for z, hs in enumerate(self.holders):
+            for h in list(hs):
+                row = pos.get(h)
+                if row is None:
+                    continue
+                path = self._wide_path(fleet, row, z, fleet.route(row)[2])
+                if path is None:
+                    continue
+                lo, hi = path
+                m = self.guard_margin
+                near = r[np.all((fleet.claim_lo[r] <= hi.max(axis=0) + m) &
+                                (fleet.claim_hi[r] >= lo.min(axis=0) - m), axis=1)]
+                near = near[(near != row) & ~np.isin(near, [pos[v] for v in hs if v in pos])]
+                near = near[out[near]]
+                if not len(near):
+                    continue
+                enter = np.zeros(len(near), dtype=bool)
+                for n, j in enumerate(near.tolist()):
+                    Wj, Hj, kj = fleet.route(j)
+                    idx = np.array([kj, min(kj + 1, len(Wj) - 1)])
+                    b_lo, b_hi = self.classes[fleet.family[j]].hold_box(fleet.pad(j, idx), Hj[idx],
+                                                                       Hj[np.minimum(idx + 1, len(Hj) - 1)])
+                    b_lo, b_hi = Wj[idx] + b_lo, Wj[idx] + b_hi
+                    meet = np.any(np.all((b_lo[:, None, :] <= hi[None]) & (b_hi[:, None, :] >= lo[None]), axis=2),
+                                  axis=1)
+                    enter[n] = meet[1] and not meet[0]
+                near = near[enter]
+                if len(near):
+                    near = near[~self._on_route(fleet, row, near, ahead=1)]
+                    out[near] = False
+                    self.requests_withheld += len(near)
+                    self.wide_withheld += len(near)
+        return out
 
     def route_through(self, fleet: JunctionFleet, row: int, z: int):
         """``(key, slot, lo, hi)``: exit slot and corridor of row ``row`` through zone ``z``'s guard.

@@ -124,6 +124,10 @@ class JunctionFleet:
         Routes in consecutive runs of rows (e.g. one per vehicle class): each part's
         waypoints ``(K, 2)``, the headings of the segments arriving at them ``(K,)``, and
         the current waypoint index of each of its rows.
+    pads : callable or None
+        ``pads(row, idx)``: the one-sided padding ``(back, front, right, left)`` (m,
+        shape (m, 4)) the claims of row ``row`` add to its footprint at its route's waypoints
+        ``idx`` (SUMO's bodies, :mod:`bridge.sumo_body`); None: no padding.
     """
 
     ids: list
@@ -131,6 +135,19 @@ class JunctionFleet:
     claim_lo: np.ndarray
     claim_hi: np.ndarray
     parts: tuple
+    pads: object = None
+
+    def pad(self, row: int, idx: np.ndarray) -> np.ndarray:
+        """The padding (m, 4) ``(back, front, right, left)`` of row ``row`` at waypoints ``idx``
+        (zeros without :attr:`pads`)."""
+        idx = np.asarray(idx, dtype=np.intp).reshape(-1)
+        if self.pads is None or not len(idx):
+            return np.zeros((len(idx), 4))
+        p = np.asarray(self.pads(row, idx), dtype=float)
+        if p.shape != (len(idx), 4) or not np.all(np.isfinite(p) & (p >= 0)):
+            raise ValueError(f"JunctionFleet.pads: vehicle {self.ids[row]!r}: need finite pads >= 0 of shape "
+                             f"({len(idx)}, 4), got shape {p.shape}")
+        return p
 
     def route(self, row: int) -> tuple[np.ndarray, np.ndarray, int]:
         """``(waypoints, headings, current waypoint index)`` of fleet row ``row``."""

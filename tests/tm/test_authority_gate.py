@@ -32,6 +32,7 @@ EAST = ((-30.0, -1.6), (60.0, -1.6))
 WEST = ((30.0, 1.6), (-60.0, 1.6))
 NORTH = ((1.6, -30.0), (1.6, 60.0))
 SOUTH = ((-1.6, 30.0), (-1.6, -60.0))
+SOUTH_FAR = ((-2.4, 30.0), (-2.4, -60.0))  # a lane 4 m from the north-bound one
 
 
 def _route(start, end):
@@ -152,7 +153,8 @@ def test_a_smaller_waiter_stops_before_a_bigger_holders_claims():
     """The two-class lock of issue 12 (grid, truck 29 / car 12, bus 111 / car 139), at one junction.
 
     T, a truck, holds the token turning right from the east arm into the north arm; B, a car, comes
-    down the north arm's other lane (x = -1.6) and crosses T's corridor, so it waits for the token
+    down the north arm's other lane (x = -2.4, out of the width of T's claims up the north arm,
+    x >= -1.2: :func:`test_a_waiter_beside_the_exit_road_stays_out_of_the_holders_path`) and crosses T's corridor, so it waits for the token
     and moves its stop point up to its entry line.  T's claim, its body still turning at the zone's
     edge, is the box ``guard_reach`` (5.3 m) each way around (1.6, 4.8): it reaches across B's lane
     up to y = 10.1, 0.2 m short of the truck's guard (10.3).  With the car's own guard (8.193) as
@@ -167,23 +169,89 @@ def test_a_smaller_waiter_stops_before_a_bigger_holders_claims():
     routes = {"T": _right_turn_east_to_north()}
     reach, family = {"truck": TRUCK}, {"T": "truck"}
     t_in = int(gate.intervals(Scene({}, routes=routes, family=family, reach=reach).fleet(), 0)[1][0])
-    assert Scene({"B": SOUTH}, k={"T": t_in - 1}, routes=routes, family=family,
+    assert Scene({"B": SOUTH_FAR}, k={"T": t_in - 1}, routes=routes, family=family,
                  reach=reach).withhold(gate, t=0) == {"B", "T"} and _holders(gate) == {"T"}
     claim_t = ((1.6 - TRUCK.guard_reach, 4.8 - TRUCK.guard_reach), (1.6 + TRUCK.guard_reach, 4.8 + TRUCK.guard_reach))
     assert claim_t[1][1] + 0.2 - g_truck < 1e-9
     kb, stuck = 0, 0
     for t in range(1, 40):
-        scene = Scene({"B": SOUTH}, k={"T": t_in + 8, "B": kb}, idle="T", claims={"T": claim_t},
+        scene = Scene({"B": SOUTH_FAR}, k={"T": t_in + 8, "B": kb}, idle="T", claims={"T": claim_t},
                       routes=routes, family=family, reach=reach)
         asked = scene.withhold(gate, t=t)
         assert _holders(gate) == {"T"}, t
         stuck = 0 if "B" in asked else stuck + 1
         kb += "B" in asked
     assert stuck > 5  # B waits at its entry line for T's token
-    lo_b, hi_b = Scene({"B": SOUTH}, k={"B": kb}).hold_box(0)
+    lo_b, hi_b = Scene({"B": SOUTH_FAR}, k={"B": kb}).hold_box(0)
     assert not boxes_meet(lo_b[None], hi_b[None], np.array(claim_t[0])[None], np.array(claim_t[1])[None]), \
         (kb, lo_b, hi_b)
     assert lo_b[1] > g_truck + 0.2 and kb == 17  # y = 13: 13 - 2.25 = 10.75
+
+
+NARROW = AuthorityReach(hold=0.25, hold_y=0.2, across=0.6, length=4.0, width=1.8, delta=1.0)
+
+
+def _toy_traffic(gate, routes, family, reach, k, steps):
+    """A toy traffic manager around ``gate`` (the ``new-fixed`` rule of the real one): every vehicle
+    asks for ``k + 1`` each step until its route's end; a request the gate lets through is granted
+    when its new claim, the hull of :meth:`AuthorityReach.claim_box` over waypoints ``k - 2 ..
+    k + 1`` (the body trails its stop point by up to 3 m), misses the claim of every vehicle that
+    stands (was not granted the last step), whose claim is its hold box at its stop point.
+    Moving claims pass each other (they are time-indexed in the real one).  Returns the stop
+    points after ``steps`` steps and the step each vehicle last moved."""
+    ids = list(routes)
+    k = {v: k.get(v, 0) for v in ids}
+    moving = dict.fromkeys(ids, False)
+    last_move = dict.fromkeys(ids, 0)
+
+    def claim(v, kk, wide):
+        W, H = routes[v]
+        c = reach[family[v]]
+        idx = np.arange(max(kk - 3, 0) if wide else kk, kk + 1)
+        nxt = np.minimum(idx + 1, len(H) - 1)
+        lo, hi = (c.claim_box if wide else c.hold_box)(np.zeros((len(idx), 4)), H[idx], H[nxt])
+        return (W[idx] + lo).min(axis=0), (W[idx] + hi).max(axis=0)
+
+    for t in range(steps):
+        claims = {v: claim(v, k[v], moving[v]) for v in ids}
+        asking = {v for v in ids if k[v] + 1 < len(routes[v][0])}
+        scene = Scene({}, k=k, idle=[v for v in ids if v not in asking], claims=claims, routes=routes,
+                      family=family, reach=reach)
+        asked = scene.withhold(gate, t=t)
+        granted = set()
+        for v in asked:
+            lo, hi = claim(v, k[v] + 1, True)
+            if not any(boxes_meet(lo[None], hi[None], claims[u][0][None], claims[u][1][None])
+                       for u in ids if u != v and not moving[u]):
+                granted.add(v)
+        for v in ids:
+            moving[v] = v in granted
+            k[v] += v in granted
+            last_move[v] = t if v in granted else last_move[v]
+    return k, last_move
+
+
+def test_a_waiter_beside_the_exit_road_stays_out_of_the_holders_path():
+    """The bus / opposite-car lock of issue 12 (grid seed 1: bus 85 / car 71 at A0, bus 93 / car 79
+    at B2), at one junction, with the toy traffic manager :func:`_toy_traffic`.
+
+    T, a truck, takes the token turning right from the east arm into the north arm (x = 1.6);
+    B, a car, comes down the north arm's other lane (x = -1.6), crosses T's corridor and waits for
+    the token.  T's claims up the north arm are 1.6 + 1.2 = 2.8 m wide to the left (x >= -1.2),
+    across B's lane up to x = -0.5, as far as T^0 + L/2 = 3.75 m past its exit slot (y = 15, up
+    to 18.75).  Without the rule B stops at its entry line (y = 13, hold box 10.75 .. 15.25),
+    beside T's exit slot: the traffic manager denies T every claim from y = 7 on (they meet B's
+    standing box), T keeps the token inside the guard and B waits for it: neither moves again.
+    With the rule B's stop point stays out of T's remaining path to the slot (at y = 22, hold box
+    from 19.75) until T has released the token; then both go through."""
+    routes = {"T": _right_turn_east_to_north(), "B": _route(*SOUTH)}
+    family, reach = {"T": "truck", "B": "narrow"}, {"truck": TRUCK, "narrow": NARROW}
+    gate = AuthorityGate([J], {"narrow": NARROW, "truck": TRUCK})
+    t_in = int(gate.intervals(Scene({}, routes={"T": routes["T"]}, family=family, reach=reach).fleet(), 0)[1][0])
+    k, last = _toy_traffic(gate, routes, family, reach, {"T": t_in - 1}, steps=160)
+    W_t, W_b = routes["T"][0], routes["B"][0]
+    assert W_t[k["T"], 1] > 40.0 and W_b[k["B"], 1] < -20.0, (k, W_t[k["T"]], W_b[k["B"]], last)
+    assert gate.wide_withheld > 0 and not any(gate.holders[0])
 
 
 def test_without_the_token_the_stop_point_stays_before_the_entry_line():
