@@ -57,6 +57,16 @@ def _random_fleet(lcs, classes, rng):
     return np.array(X), np.array(C), np.array(H), np.array(L)
 
 
+def _cache_setup(lcs, classes, seed):
+    """The cache property tests' start: a seeded generator, a claim book and its cache, a random
+    fleet (:func:`_random_fleet`, only examples whose levels lie in the family) and its ids."""
+    rng = np.random.default_rng(seed)
+    book = _Book(lcs)
+    X, C, H, L = _random_fleet(lcs, classes, rng)
+    assume(all(L[v] <= lcs[c].ctl.N for v, c in enumerate(classes)))
+    return rng, book, ClaimCache(book), X, C, H, L, [f"v{v}" for v in range(len(classes))]
+
+
 def _switch_at_random(lcs, classes, X, C, H, L, rng, p_switch) -> np.ndarray:
     """Each vehicle switches (granted) to the waypoint ``delta`` ahead with probability ``p_switch``
     where its state is inside that waypoint's sets; ``C`` and ``L`` updated in place; the granted mask."""
@@ -106,13 +116,8 @@ def test_shifted_claims_contain_fresh_ones(lcs, classes, seed, policy, sign, p_s
     the fresh claims of the same state (S_fresh_k ⊆ S_cached_k for every vehicle and slot), their
     slot boxes are those of their boxes, every position lies in slot 1 of the claims in force of the
     step before (no tube escape, but for the kicked vehicle), and the kicked vehicle is not reused."""
-    rng = np.random.default_rng(seed)
-    book = _Book(lcs)
-    cache = ClaimCache(book)
+    rng, book, cache, X, C, H, L, ids = _cache_setup(lcs, classes, seed)
     n = len(classes)
-    X, C, H, L = _random_fleet(lcs, classes, rng)
-    assume(all(L[v] <= lcs[c].ctl.N for v, c in enumerate(classes)))
-    ids = [f"v{v}" for v in range(n)]
     length = np.array([lcs[c].vclass.length for c in classes])
     width = np.array([lcs[c].vclass.width for c in classes])
     inforce = None
@@ -147,13 +152,8 @@ def test_granted_claims_committed_are_shifted_and_contain_fresh_ones(lcs, classe
     reach's round-off), their slot boxes are those of their boxes, no position leaves slot 1 of the
     claims in force the step before; no row is computed fresh for a grant, and some row granted the
     step before was shifted (the fast path was taken)."""
-    rng = np.random.default_rng(seed)
-    book = _Book(lcs)
-    cache = ClaimCache(book)
+    rng, book, cache, X, C, H, L, ids = _cache_setup(lcs, classes, seed)
     n = len(classes)
-    X, C, H, L = _random_fleet(lcs, classes, rng)
-    assume(all(L[v] <= lcs[c].ctl.N for v, c in enumerate(classes)))
-    ids = [f"v{v}" for v in range(n)]
     length = np.array([lcs[c].vclass.length for c in classes])
     width = np.array([lcs[c].vclass.width for c in classes])
     inforce, granted_before, shifted_after_grant, grants = None, np.zeros(n, dtype=bool), 0, 0
@@ -449,13 +449,8 @@ def test_padded_shifted_claims_contain_fresh_padded_ones(lcs, classes, seed, pol
     step to step (a PadTable's padding is non-increasing in the window start) and sometimes grows.
     At every step the cache's claims contain the fresh claims built with the pad needed now; a row whose
     pad exceeds the pad its claims in force were built with is never reused (reason ``pad``)."""
-    rng = np.random.default_rng(seed)
-    book = _Book(lcs)
-    cache = ClaimCache(book)
+    rng, book, cache, X, C, H, L, ids = _cache_setup(lcs, classes, seed)
     n = len(classes)
-    X, C, H, L = _random_fleet(lcs, classes, rng)
-    assume(all(L[v] <= lcs[c].ctl.N for v, c in enumerate(classes)))
-    ids = [f"v{v}" for v in range(n)]
     pad = rng.uniform(0.0, 1.5, (n, 2))
     built = None  # the pads the claims in force were built with
     for t in range(25):
