@@ -29,7 +29,7 @@ from controllers import tolerances as tol
 from controllers.settings import ControllerSettings
 from controllers.synthesis import SetFamily, rotate_pairs
 
-__all__ = ["STMPC", "InfeasibleQPError", "OutsideDomainError"]
+__all__ = ["STMPC", "FactorMembership", "InfeasibleQPError", "OutsideDomainError"]
 
 
 class InfeasibleQPError(RuntimeError):
@@ -144,6 +144,57 @@ class _Polar:
         return self.a0[pos] * x + self.a1[pos] * y - self.b[pos] <= tol.MEMBERSHIP_TOL
 
 
+@dataclass(frozen=True, eq=False)
+class FactorMembership:
+    """Membership index of one factor's error in its own nested levels ``T_f^0 .. T_f^N``
+    (what :meth:`STMPC.factor_index` computes, for users without a controller: the claims of
+    :mod:`tm.reach`).  Same tables and ``MEMBERSHIP_TOL`` as the controller's."""
+
+    states: np.ndarray
+    Hp: np.ndarray
+    hp: np.ndarray
+    polar: "_Polar | None"
+    N: int
+
+    @classmethod
+    def of(cls, factor) -> "FactorMembership":
+        """From a synthesised factor (``states`` and ``levels``, :class:`controllers.synthesis.SetFamily`)."""
+        Hp, hp = _pad([P.A for P in factor.levels], [P.b for P in factor.levels])
+        return cls(np.asarray(factor.states), Hp, hp, _Polar.build(factor.levels), len(factor.levels) - 1)
+
+    def index(self, E: np.ndarray) -> np.ndarray:
+        """``min{l : e_f ∈ T_f^l}`` per row of the full error ``E`` (V, n); ``N + 1`` outside."""
+        Ef = np.asarray(E, dtype=float)[:, self.states]
+        steps = max(1, int(np.ceil(np.log2(self.N + 2))))
+        return _nested_index(lambda lev: _factor_inside(self, Ef, lev), Ef.shape[0], self.N, steps)
+
+
+def _factor_inside(t, Ef: np.ndarray, lev: np.ndarray) -> np.ndarray:
+    """Row ``i`` of a factor's error ``Ef`` (V, d) in the factor's level ``lev[i]`` (``t``: a
+    :class:`_FactorTables` or :class:`FactorMembership`)."""
+    if t.polar is not None:
+        return t.polar.inside(Ef[:, 0], Ef[:, 1], lev)
+    viol = -t.hp[lev]
+    for j in range(Ef.shape[1]):
+        viol += t.Hp[j][lev] * Ef[:, j, None]
+    return viol.max(axis=1) <= tol.MEMBERSHIP_TOL
+
+
+def _nested_index(inside, V: int, N: int, steps: int) -> np.ndarray:
+    """Smallest level ``0 .. N`` for which ``inside(lev)`` holds per row, ``N + 1`` where none does.
+    The levels are nested (``T^l ⊆ T^{l+1}``), so membership is monotone in ``l``: a binary search
+    over ``[0, N+1]`` for every row at once."""
+    lo = np.zeros(V, dtype=np.intp)
+    hi = np.full(V, N + 1, dtype=np.intp)
+    for _ in range(steps):
+        mid = np.minimum((lo + hi) // 2, N)
+        ok = inside(mid)
+        open_ = lo < hi
+        hi = np.where(open_ & ok, mid, hi)
+        lo = np.where(open_ & ~ok, mid + 1, lo)
+    return hi
+
+
 class STMPC:
     """The ST-MPC of one vehicle class, applied to many vehicles at once.
 
@@ -185,6 +236,10 @@ class STMPC:
         self._along = next(k for k, t in enumerate(self._tables) if 0 in t.states)
         st = list(self._tables[self._along].states)
         self._along_v = st.index(2) if 2 in st else None
+        # across factor (state 1, road-frame models): in authority mode it keeps its own tube
+        # (:meth:`control`), so the claims' across extent follows its own index (tm.reach)
+        self._across = next((k for k, t in enumerate(self._tables) if 1 in t.states and k != self._along), None) \
+            if self.model.frame == "road" else None
         # the fastest along-road speed any tube allows (T^N is the largest set): a speed bound at or
         # above it can never bind
         f = family.factors[self._along]
@@ -222,30 +277,21 @@ class STMPC:
             ``N + 1`` marks a state outside the domain of attraction.
         """
         E = self.error(X, centres, heading)
-        V = E.shape[0]
-        # The levels are nested (T^l ⊆ T^{l+1}), so membership is monotone in l: a
-        # binary search over [0, N+1] for every vehicle at once (N+1: outside).
-        lo = np.zeros(V, dtype=np.intp)
-        hi = np.full(V, self.N + 1, dtype=np.intp)
-        for _ in range(self._steps):
-            mid = np.minimum((lo + hi) // 2, self.N)
-            inside = self._inside(E, mid)
-            open_ = lo < hi
-            hi = np.where(open_ & inside, mid, hi)
-            lo = np.where(open_ & ~inside, mid + 1, lo)
-        return hi
+        return _nested_index(lambda lev: self._inside(E, lev), E.shape[0], self.N, self._steps)
+
+    def factor_index(self, E: np.ndarray, factor: int) -> np.ndarray:
+        """Membership index of factor ``factor`` alone: ``min{l : e_f ∈ T_f^l}`` for each row of the
+        error ``E`` (V, n) (:meth:`error`); ``N + 1`` outside ``T_f^N``.  Never above :meth:`index`
+        (the joint index is the largest over the factors)."""
+        t = self._tables[factor]
+        Ef = np.asarray(E, dtype=float)[:, t.states]
+        return _nested_index(lambda lev: _factor_inside(t, Ef, lev), Ef.shape[0], self.N, self._steps)
 
     def _inside(self, E: np.ndarray, lev: np.ndarray) -> np.ndarray:
         """Row ``i`` of ``E`` in ``T^{lev[i]}`` (error coordinates), every factor."""
         ok = np.ones(E.shape[0], dtype=bool)
         for t in self._tables:
-            if t.polar is not None:
-                ok &= t.polar.inside(E[:, t.states[0]], E[:, t.states[1]], lev)
-                continue
-            viol = -t.hp[lev]
-            for j, s in enumerate(t.states):
-                viol += t.Hp[j][lev] * E[:, s, None]
-            ok &= viol.max(axis=1) <= tol.MEMBERSHIP_TOL
+            ok &= _factor_inside(t, E[:, t.states], lev)
         return ok
 
     def index_scan(self, X: np.ndarray, centres: np.ndarray, heading=None) -> np.ndarray:
@@ -342,6 +388,7 @@ class STMPC:
         U = E @ self.family.K.T
         qp = np.nonzero(l > 0)[0]
         if qp.size:
+            lev = self.tube_levels(E[qp], l[qp])
             solver = self.settings.solver
             vdes = cap = None
             if v_cap is not None and self.model.frame == "road" and self._along_v is not None:
@@ -350,18 +397,32 @@ class STMPC:
                 vdes = self.desired_speed(E[qp], cap if cap is not None else
                                           None if v_cap is None else np.asarray(v_cap, dtype=float)[qp])
             if solver == "exact" and all(len(t.inputs) == 1 for t in self._tables):
-                U[qp] = self._solve_exact(E[qp], l[qp], qp, ids, vdes, cap)
+                U[qp] = self._solve_exact(E[qp], lev, qp, ids, vdes, cap)
             else:
-                U[qp] = self._solve_generic(E[qp], l[qp], qp, ids, "daqp" if solver == "exact" else solver,
+                U[qp] = self._solve_generic(E[qp], lev, qp, ids, "daqp" if solver == "exact" else solver,
                                             vdes, cap)
         return self._to_world(U, heading)
 
-    def _solve_exact(self, E, l, rows, ids, vdes=None, cap=None):
-        """Closed form per single-input factor, every vehicle at once (levels gathered); ``cap``:
-        the speed bound on the along factor (see :meth:`control`; the tube wins)."""
+    def tube_levels(self, E: np.ndarray, l: np.ndarray) -> np.ndarray:
+        """The level ``T~`` each factor's next state must lie in, per row (n_factors, V), for rows
+        of index ``l >= 1``: ``l - 1`` for every factor (eq. (6)); in ``authority`` mode the across
+        factor keeps its own tube, ``max(l_y - 1, 0)`` with ``l_y <= l`` its own index
+        (:meth:`factor_index`).  That is a subset of ``T~^{l-1}`` (nested levels), so the joint
+        index still drops by one each step; and ``x_y(t+k) ∈ T_y^{max(l_y - k, 0)}``: the claims'
+        across extent (:func:`tm.reach.reach_claims`) follows ``l_y``, not ``l``."""
+        l = np.asarray(l, dtype=np.intp)
+        lev = np.tile(l - 1, (len(self._tables), 1))
+        if self.settings.mode == "authority" and self._across is not None:
+            ly = np.minimum(self.factor_index(E, self._across), l)
+            lev[self._across] = np.maximum(ly - 1, 0)
+        return lev
+
+    def _solve_exact(self, E, lev, rows, ids, vdes=None, cap=None):
+        """Closed form per single-input factor, every vehicle at once (levels gathered: ``lev``
+        (n_factors, V), :meth:`tube_levels`); ``cap``: the speed bound on the along factor (see
+        :meth:`control`; the tube wins)."""
         U = np.empty((E.shape[0], self.model.m))
         ulo, uhi = self.model.u_bounds
-        lev = l - 1
         for ti, t in enumerate(self._tables):
             k = int(t.inputs[0])
             Ef = E[:, t.states]
@@ -371,7 +432,7 @@ class STMPC:
                 u_free = (vdes - Ef @ t.A[j]) / b[j]
             else:
                 u_free = -((Ef @ t.A.T) @ b) / (b @ b)
-            lo, hi, bad = self._interval(t, Ef, lev, ulo[k], uhi[k])
+            lo, hi, bad = self._interval(t, Ef, lev[ti], ulo[k], uhi[k])
             if bad.any():
                 r = rows[np.nonzero(bad)[0]]
                 raise InfeasibleQPError(
@@ -432,8 +493,9 @@ class STMPC:
         return ok
 
     def _qp_data(self, e, lev, vdes=None, cap=None):
-        """Dense QP data of eq. (6) on all inputs: 0.5 u'Hu + f'u, G u <= g (``vdes``: the
-        movement-authority cost on the along factor instead; ``cap``: rows ``|v+| <= cap``)."""
+        """Dense QP data of eq. (6) on all inputs: 0.5 u'Hu + f'u, G u <= g (``lev``: each factor's
+        tube level, :meth:`tube_levels`; ``vdes``: the movement-authority cost on the along factor
+        instead; ``cap``: rows ``|v+| <= cap``)."""
         m = self.model.m
         Hq = np.zeros((m, m))
         f = np.zeros(m)
@@ -447,10 +509,11 @@ class STMPC:
                 Ae, Bf = np.array([Ae[j] - vdes]), Bf[j:j + 1]
             Hq[np.ix_(t.inputs, t.inputs)] += Bf.T @ Bf
             f[t.inputs] += Bf.T @ Ae
-            G = np.zeros((t.Ht[lev - 1].shape[0], m))
-            G[:, t.inputs] = t.HtB[lev - 1]
+            lv = int(lev[ti])
+            G = np.zeros((t.Ht[lv].shape[0], m))
+            G[:, t.inputs] = t.HtB[lv]
             G_rows.append(G)
-            g_rows.append(t.ht[lev - 1] - t.HtA[lev - 1] @ ef)
+            g_rows.append(t.ht[lv] - t.HtA[lv] @ ef)
             if cap is not None and ti == self._along:
                 j = self._along_v
                 Gc = np.zeros((2, m))
@@ -460,20 +523,20 @@ class STMPC:
                 g_rows.append(np.array([cap - base, cap + base]))
         return Hq, f, np.vstack(G_rows), np.concatenate(g_rows)
 
-    def _solve_generic(self, E, l, rows, ids, solver, vdes=None, cap=None):
+    def _solve_generic(self, E, lev, rows, ids, solver, vdes=None, cap=None):
         U = np.empty((E.shape[0], self.model.m))
         ulo, uhi = self.model.u_bounds
         for i in range(E.shape[0]):
             vd = None if vdes is None else float(vdes[i])
             ci = None if cap is None else float(cap[i])
-            Hq, f, G, g = self._qp_data(E[i], int(l[i]), vd, ci)
-            u, ok = self._solve_one(solver, Hq, f, G, g, ulo, uhi, int(l[i]))
+            Hq, f, G, g = self._qp_data(E[i], lev[:, i], vd, ci)
+            u, ok = self._solve_one(solver, Hq, f, G, g, ulo, uhi, int(lev.max(axis=0)[i]) + 1)
             if ci is not None and not ok:
                 # the speed bound misses the tube: the tube wins.  The tube's v+ then lies wholly
                 # above cap or wholly below -cap; either way min (v+ - cap)^2 over the tube is its
                 # end nearest [-cap, cap], the input _solve_exact takes.
-                Hq, f, G, g = self._qp_data(E[i], int(l[i]), ci)
-                u, ok = self._solve_one(solver, Hq, f, G, g, ulo, uhi, int(l[i]))
+                Hq, f, G, g = self._qp_data(E[i], lev[:, i], ci)
+                u, ok = self._solve_one(solver, Hq, f, G, g, ulo, uhi, int(lev.max(axis=0)[i]) + 1)
             if not ok or np.any(G @ u > g + tol.QP_FEAS_TOL * 10) or np.any(u < ulo - 1e-6) \
                     or np.any(u > uhi + 1e-6):
                 r = rows[[i]]

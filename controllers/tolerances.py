@@ -40,10 +40,13 @@ SOLVER_AGREEMENT_TOL = 1e-5
 
 #: proxsuite's answers agree with the exact minimiser only to this (m/s^2): on these
 #: ill-conditioned 2-variable QPs (Hessian B'B ~ 1e-2) it stops at feasible points up to
-#: 1.7e-2 away (measured: drag model; 1.5e-3 on the car class).  Tighter eps_abs does not
-#: help and scaling the cost makes it report false infeasibility.  Its answers are still
-#: checked feasible; the default solver is the exact one.
-PROXSUITE_AGREEMENT_TOL = 2e-2
+#: 1.7e-2 away in paper mode (measured: drag model; 1.5e-3 on the car class), and up to 4.7e-2
+#: in authority mode, where the across factor keeps its own, smaller tube (bus, across level 7:
+#: proxsuite -0.4534, exact and daqp -0.4068 m/s^2, with eps_abs 1e-6 .. 1e-10 alike).  Tighter
+#: eps_abs does not help and scaling the cost makes it report false infeasibility.  Its answers
+#: are still checked feasible; the default solver is the exact one, and daqp agrees with it
+#: within SOLVER_AGREEMENT_TOL.
+PROXSUITE_AGREEMENT_TOL = 5e-2
 
 #: Geometric separation below which two footprints count as touching (m).
 #: Positive separation is required by the paper; 1e-9 m absorbs round-off.

@@ -13,7 +13,14 @@ as a box in the frame of ``c``'s segment (x along, y across), closed form:
 * ``T^m``: its velocity range, and ``g_m``, ``h_m`` of :mod:`controllers.authority`, so the
   along extent is ``[max(p_lo_k, h_m(v_hi_k)), min(p_hi_k, g_m(v_lo_k))]`` with
   ``[v_lo_k, v_hi_k]`` the reach's velocity interval cut to ``T^m``'s;
-* across: the reach's interval cut to ``T^m``'s across range;
+* across: the reach's interval cut to the across range of ``T_y^{max(l_y + 1 - k, 0)}``, where
+  ``l_y <= l`` is the across factor's own index: a movement-authority controller keeps the across
+  factor in its own tube (:meth:`controllers.stmpc.STMPC.tube_levels`), ``x_y(t+k) ∈
+  T_y^{max(l_y - k, 0)}``; one level more absorbs a tie at a level's boundary between the
+  controller's and the claim's arithmetic.  (With ``T^{l-k}``'s range, the across extent of a
+  cruising car's claims grew to +-0.95 m, a bus's to +-1.58 m: opposite inner lanes, 3.2 m
+  apart, could not pass each other; issue 12, ``grid`` seed 1, bus 85 / car 71.)  A model
+  without ``across`` (:class:`ReachModel`) uses ``T^{l-k}``'s range, as before;
 * the footprint: its bounding box in the segment frame (``body_offset``: the largest angle
   between the body and the segment, 0 on a straight), plus ``body_pad``: how far the simulator's
   own body may reach beyond it (SUMO's lane-following body, :mod:`bridge.sumo_body`).
@@ -37,6 +44,7 @@ from functools import cached_property
 import numpy as np
 
 from controllers.authority import AuthorityTables
+from controllers.stmpc import FactorMembership
 from controllers.synthesis import SetFamily, along_factor, rotate_pairs
 from controllers.tolerances import GEOMETRY_TOL, REACH_LOOKUP_MARGIN
 from tm.geometry import broad_phase
@@ -65,6 +73,9 @@ class ReachModel:
     tables : AuthorityTables
     length, width : float
         Footprint (m).
+    across : FactorMembership, optional
+        The across factor's own membership index (its levels ``T_y^m``): the claims' across extent
+        follows it (module notes).  None: the joint index's levels, as for any controller.
     """
 
     Ak_al: np.ndarray
@@ -74,6 +85,7 @@ class ReachModel:
     tables: AuthorityTables
     length: float
     width: float
+    across: FactorMembership | None = None
 
     @property
     def N(self) -> int:
@@ -86,7 +98,9 @@ class ReachModel:
 
     @classmethod
     def build(cls, family: SetFamily, tables: AuthorityTables, length: float, width: float) -> "ReachModel":
-        """Powers and radii of both factors of ``family`` (road frame, 2-D factors)."""
+        """Powers and radii of both factors of ``family`` (road frame, 2-D factors), and the across
+        factor's own index: for vehicles driven by :class:`controllers.stmpc.STMPC` in
+        ``authority`` mode, which keeps that factor in its own tube."""
         m = family.model
         K = family.N + 2
         out = {}
@@ -109,7 +123,8 @@ class ReachModel:
             out[f"Ak_{name}"], out[f"r_{name}"] = Ak, r
         for a in out.values():
             a.flags.writeable = False
-        return cls(tables=tables, length=float(length), width=float(width), **out)
+        across = FactorMembership.of(next(f for f in family.factors if 1 in f.states))
+        return cls(tables=tables, length=float(length), width=float(width), across=across, **out)
 
 
 @dataclass(frozen=True, eq=False)
@@ -243,8 +258,12 @@ def reach_claims(rm: ReachModel, X: np.ndarray, centre: np.ndarray, heading: np.
     # tables read just outside the velocity bounds (REACH_LOOKUP_MARGIN: ties at grid points)
     np.maximum(np.maximum(cp - ra[:, 0], T.h(mm, v_hi + REACH_LOOKUP_MARGIN)), T.p_lo[mm], out=P[0, :, :Kr])
     np.minimum(np.minimum(cp + ra[:, 0], T.g(mm, v_lo - REACH_LOOKUP_MARGIN)), T.p_hi[mm], out=P[1, :, :Kr])
-    np.maximum(cy - ry[:, 0], T.y_lo[mm], out=P[2, :, :Kr])
-    np.minimum(cy + ry[:, 0], T.y_hi[mm], out=P[3, :, :Kr])
+    my = mm
+    if rm.across is not None:  # the across factor's own tube, one level of slack (module notes)
+        ly = np.minimum(rm.across.index(E) + 1, index)
+        my = np.maximum(ly[:, None] - k[None, :Kr], 0)
+    np.maximum(cy - ry[:, 0], T.y_lo[my], out=P[2, :, :Kr])
+    np.minimum(cy + ry[:, 0], T.y_hi[my], out=P[3, :, :Kr])
     P[0, :, Kr:], P[1, :, Kr:] = T.p_lo[0], T.p_hi[0]
     P[2, :, Kr:], P[3, :, Kr:] = T.y_lo[0], T.y_hi[0]
     empty = (P[0] > P[1]) | (P[2] > P[3])

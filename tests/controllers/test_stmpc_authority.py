@@ -134,3 +134,41 @@ def test_authority_mode_needs_an_authority_family(shared_set_cache):
         ControllerSettings(mode="fast")
     with pytest.raises(SettingsError, match="standoff"):
         ControllerSettings(standoff=-1.0)
+
+
+def _across_steps(fam, mode, policy, seed, n=40):
+    """One plant step of ``n`` random states (every level, random headings, waypoint kept) under
+    ``mode``; returns the across factor's own index before and after."""
+    ctl = STMPC(fam, ControllerSettings(mode=mode))
+    rng = np.random.default_rng(seed)
+    E = np.vstack([fam.sample(int(l), 1, rng) for l in rng.integers(1, fam.N + 1, n)])
+    H = rng.uniform(-np.pi, np.pi, n)
+    C = rng.uniform(-50.0, 50.0, (n, 2))
+    X = rotate_pairs(E, H) + np.hstack([C, np.zeros((n, 2))])
+    l = ctl.index(X, C, H)
+    ly = ctl.factor_index(ctl.error(X, C, H), ctl._across)
+    U = ctl.control(X, C, l, heading=H)
+    Xn, _ = step(fam.model, X, U, C, policy, rng, heading=H)
+    return l, ly, ctl.factor_index(ctl.error(Xn, C, H), ctl._across), ctl.index(Xn, C, H)
+
+
+@hsettings(max_examples=25, deadline=None)
+@given(c=st.sampled_from(URBAN), policy=st.sampled_from(["random", "adversarial"]), seed=st.integers(0, 2 ** 31))
+def test_authority_keeps_the_across_factor_in_its_own_tube(fams, c, policy, seed):
+    """Authority mode: the across factor's own index ``l_y <= l`` drops by one each step or stays 0,
+    whatever the disturbance (so ``x_y(t+k) ∈ T_y^{max(l_y - k, 0)}``: what tm.reach's across extent
+    relies on), and the joint index still strictly drops (eq. (5))."""
+    l, ly, ly_next, l_next = _across_steps(fams[c], "authority", policy, seed)
+    assert np.all(ly <= l)
+    assert np.all(ly_next <= np.maximum(ly - 1, 0)), (ly, ly_next)
+    assert np.all((l_next < l) | ((l == 0) & (l_next == 0)))
+
+
+def test_paper_mode_does_not_keep_the_across_tube(fams):
+    """The property above is the authority controller's doing: eq. (6) alone (paper mode, the
+    joint level for every factor) lets the across index grow on some of the same samples."""
+    grew = 0
+    for seed in range(5):
+        _, ly, ly_next, _ = _across_steps(fams["car"], "paper", "adversarial", seed)
+        grew += int(np.sum(ly_next > np.maximum(ly - 1, 0)))
+    assert grew > 0

@@ -31,7 +31,7 @@ def lcs(shared_set_cache):
 def _point_model(lc):
     """The class's claim model with a zero footprint: boxes then bound the position itself."""
     r = lc.reach
-    return ReachModel(r.Ak_al, r.Ak_ac, r.r_al, r.r_ac, r.tables, 0.0, 0.0)
+    return ReachModel(r.Ak_al, r.Ak_ac, r.r_al, r.r_ac, r.tables, 0.0, 0.0, across=r.across)
 
 
 
@@ -273,3 +273,31 @@ def test_one_sided_body_pad_moves_each_side_by_its_own_pad(lcs, c, seed, heading
     np.testing.assert_allclose(fp.hi[0], np.tile(half + phi, (2, 1)), atol=1e-12)
     with pytest.raises(ValueError, match="body_pad"):
         reach_claims(lc.reach, X, cen, hd, l, body_pad=np.zeros((1, 3)))
+
+
+@pytest.mark.parametrize("c", URBAN)
+def test_across_extent_follows_the_across_factors_own_index(lcs, c):
+    """A vehicle cruising on its lane's centre line (across state 0) far behind its stop point: its
+    claims' across half-width is that of ``T_y^1`` (the across factor's own index 0, plus one level
+    of slack) plus ``W/2`` at every slot, where the joint level's across range (the model without
+    ``across``) reaches more than twice that at some slot (car 0.95 m, bus 1.58 m by ``T_y^N``)."""
+    from dataclasses import replace
+
+    lc = lcs[c]
+    ctl, rm = lc.ctl, lc.reach
+    v = 13.0
+    X = np.array([[0.0, 0.0, v, 0.0]])
+    lead = min(float(ctl.authority_lead()), 60.0)
+    cen, hd = np.array([[lead, 0.0]]), np.zeros(1)
+    l = ctl.index(X, cen, hd)
+    assert l[0] <= rm.N
+    tight = reach_claims(rm, X, cen, hd, l)
+    loose = reach_claims(replace(rm, across=None), X, cen, hd, l)
+    half_w = 0.5 * rm.width
+    y1 = max(-rm.tables.y_lo[1], rm.tables.y_hi[1])
+    full = (tight.lo <= tight.hi).all(axis=-1)[0]
+    assert np.all(tight.hi[0, full, 1] <= y1 + half_w + GEOMETRY_TOL)
+    assert np.all(-tight.lo[0, full, 1] <= y1 + half_w + GEOMETRY_TOL)
+    assert loose.hi[0, full, 1].max() - half_w > 2.0 * y1
+    # along, nothing changes
+    assert np.array_equal(tight.lo[..., 0], loose.lo[..., 0]) and np.array_equal(tight.hi[..., 0], loose.hi[..., 0])
