@@ -14,6 +14,8 @@ An east-bound route starting at x = -30 enters at waypoint 20 (x = -10: -10 + 2.
 misses the guard, 10 - 2.25 does not).
 """
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
@@ -139,6 +141,7 @@ def test_a_token_handed_out_at_the_entry_line_is_kept():
 #: A truck: claims 1.6 m across, 7 m x 2.4 m; its claims stick 1.6 + hypot(7, 2.4) / 2 = 5.3 m out of
 #: a zone (the car's 3.193 m): its guard reaches 10.3 m from the centre.
 TRUCK = AuthorityReach(hold=0.25, hold_y=0.2, across=1.6, length=7.0, width=2.4, delta=1.0)
+GUARD_TRUCK = 5.0 + TRUCK.guard_reach  # the shared guard of a fleet with trucks: 10.3 m
 
 
 def _right_turn_east_to_north():
@@ -482,3 +485,60 @@ def test_bad_extents_are_named():
         AuthorityReach(hold=0.2, hold_y=0.2, across=-1.0, length=4.0, width=1.8, delta=1.0)
     with pytest.raises(ValueError, match=r"AuthorityReach: .*delta > 0"):
         AuthorityReach(hold=0.2, hold_y=0.2, across=1.0, length=4.0, width=1.8, delta=0.0)
+
+
+def _turn_scene(k_f: int, right_pad: float, f_holds: bool = False):
+    """T (truck) holds the token at the last waypoint before its right turn into the north arm; F
+    (car) queues behind it on the same lanes, stop point ``k_f``, asking for ``k_f + 1``.  T's
+    claims up the north arm carry ``right_pad`` metres of body padding on their right (east) side,
+    as SUMO's bent body of a long vehicle at a turn's start does (grid seed 1: bus 111 at D0, right
+    pad 5.62 m): its boxes from the turn on swing back over the east arm, where F stands."""
+    routes = {"T": _right_turn_east_to_north(), "F": _right_turn_east_to_north()}
+    family, reach = {"T": "truck", "F": "narrow"}, {"truck": TRUCK, "narrow": NARROW}
+    gate = AuthorityGate([J], {"narrow": NARROW, "truck": TRUCK})
+    W, H = routes["T"]
+    corner = int(np.flatnonzero(np.abs(H - H[0]) > 1e-9)[0]) - 1  # the last waypoint on the east arm
+    t_in = int(gate.intervals(Scene({}, routes={"T": routes["T"]}, family=family, reach=reach).fleet(), 0)[1][0])
+    assert Scene({}, routes={"T": routes["T"]}, k={"T": t_in - 1}, family=family, reach=reach).withhold(gate) == {"T"}
+
+    def pads(row, idx):
+        out = np.zeros((len(idx), 4))
+        if row == 0:  # T: its boxes on the north arm
+            out[np.asarray(idx) > corner, 2] = right_pad
+        return out
+
+    W_f = routes["F"][0]
+    # F drives up: its claims reach from its hold box forward to x = 9, inside the 10.3 m guard
+    # (a holder keeps its token while they do)
+    claims = {"F": ((9.0, W_f[k_f, 1] - HOLD[1]), tuple(W_f[k_f] + HOLD))} if f_holds else None
+    scene = Scene({}, routes=routes, k={"T": corner, "F": k_f}, idle="T", family=family, reach=reach,
+                  claims=claims)
+    fleet = replace(scene.fleet(), pads=pads)
+    if f_holds:  # F follows T through (JunctionGate._follows): it holds the token too
+        key, _, lo, hi = gate.route_through(fleet, 1, 0)
+        gate.holders[0]["F"] = (key, lo, hi)
+    req = gate.withhold(1, fleet, scene.requesting, np.zeros((1, 2)), np.zeros((1, 2)))
+    assert ("F" in gate.holders[0]) == f_holds
+    return gate, dict(zip(scene.ids, req)), W, corner
+
+
+def test_a_follower_stays_out_of_the_claims_its_turning_leader_has_still_to_make():
+    """The queue lock of issue 12 (grid seed 1, D0: bus 111 turning right at its entry, car 124
+    standing 3.5 m behind it, for good): the holder's queue may close up to its current claims,
+    not into the boxes of its path ahead that swing back over the arm it comes from.  With a 7 m
+    right pad, T's box at the first north-arm waypoint reaches x = 1.6 + 1.6 + 1.2 + 7 = 11.4 m;
+    F (hold box ±2.25 m) asking for the first waypoint whose box would reach past that (but stays
+    outside the 10.3 m guard: no token needed) is withheld, by this rule alone.  Without the padding
+    (T's turn claims stay in the north arm, x <= 4.4) the same request is made; and one waypoint
+    further back F's request is made (it closes up as far as T's claims allow)."""
+    W_f = _right_turn_east_to_north()[0]
+    reach_x = 1.6 + TRUCK.across + 0.5 * TRUCK.width + 7.0       # 11.4: T's padded turn box, east edge
+    k_ask = int(np.flatnonzero(W_f[:, 0] - HOLD[0] > reach_x)[-1])  # F's box now clear of it, next not
+    assert W_f[k_ask + 1, 0] - HOLD[0] > GUARD_TRUCK + 0.2        # and outside the guard: no token asked
+    for f_holds in (False, True):  # in grid's lock car 124 held D0's token too, following bus 111
+        gate, asked, W, corner = _turn_scene(k_ask, 7.0, f_holds)
+        assert not asked["F"] and gate.wide_withheld == 1, f_holds
+    gate, asked, _, _ = _turn_scene(k_ask, 0.0)
+    assert asked["F"] and gate.wide_withheld == 0
+    gate, asked, _, _ = _turn_scene(k_ask - 1, 7.0)
+    assert asked["F"] and gate.wide_withheld == 0
