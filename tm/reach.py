@@ -195,6 +195,19 @@ class ReachClaims:
             out._with_boxes(np.concatenate([pad(b, axis=2) for b in boxes], axis=1))
         return out
 
+    def polygons(self) -> np.ndarray:
+        """Corners (n, 4, 2), counter-clockwise, of each vehicle's claim as drawn (MCAP ``--log
+        full``): the box in its segment frame holding every non-empty slot, ``∪_k S_k``'s bounding
+        box (what the ``union`` check compares), in the world.  A vehicle without a non-empty slot
+        is its centre, four times."""
+        lo, hi = _hull(self.lo, self.hi)
+        none = ~np.all(lo <= hi, axis=1)
+        lo, hi = np.where(none[:, None], 0.0, lo), np.where(none[:, None], 0.0, hi)
+        C = np.stack([lo, np.column_stack([hi[:, 0], lo[:, 1]]), hi, np.column_stack([lo[:, 0], hi[:, 1]])], axis=1)
+        n = len(self.centre)
+        world = rotate_pairs(C.reshape(4 * n, 2), np.repeat(self.heading, 4)).reshape(n, 4, 2)
+        return self.centre[:, None, :] + world
+
     def world_corners(self, i: int, k: int) -> np.ndarray:
         """Corners (4, 2) of box ``S_k`` of vehicle ``i`` in the world (``k >= 1``)."""
         lo, hi = self.lo[i, k - 1], self.hi[i, k - 1]

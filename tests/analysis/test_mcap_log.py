@@ -92,3 +92,29 @@ def test_invalid_level_named(tmp_path):
         observers_for(tmp_path, "all")
     with pytest.raises(ValueError, match="level must be"):
         McapLogger(tmp_path / "x.mcap", "none")
+
+
+def test_full_log_in_authority_mode_draws_every_vehicles_claim(tmp_path):
+    """``--controller authority --log full`` (reach claims, tm.reach.ReachClaims) writes a claim loop
+    per vehicle and step (``muvsim run grid --controller authority --log full`` failed at the first
+    step: ReachClaims had no ``polygons``), each four points of positive area."""
+    opts = SimpleNamespace(vclass="car", tm="optimal", check="timed", switching="early", disturbance="random",
+                           solver="exact", duration=2.0, vehicles=8, seed=0, log="full", controller="authority")
+    summary = run_multi("crossing", tmp_path, opts)
+    assert "error" not in summary
+    loops = rows = 0
+    with open(tmp_path / "run.mcap", "rb") as fh:
+        for _, channel, msg in make_reader(fh).iter_messages(topics=["/scene/claims", "/vehicles"]):
+            if channel.topic == "/vehicles":
+                rows += len(json.loads(msg.data)["vehicles"])
+                continue
+            for e in json.loads(msg.data)["entities"]:
+                if not e["id"].startswith("claim/"):
+                    continue
+                pts = [(p["x"], p["y"]) for p in e["lines"][0]["points"]]
+                assert len(pts) == 4
+                x, y = zip(*pts)
+                area = 0.5 * abs(sum(x[i] * y[i - 1] - x[i - 1] * y[i] for i in range(4)))
+                assert area > 1.0  # at least a footprint (5 m x 1.8 m)
+                loops += 1
+    assert loops == rows > 0  # one loop per vehicle and step

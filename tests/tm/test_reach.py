@@ -301,3 +301,32 @@ def test_across_extent_follows_the_across_factors_own_index(lcs, c):
     assert loose.hi[0, full, 1].max() - half_w > 2.0 * y1
     # along, nothing changes
     assert np.array_equal(tight.lo[..., 0], loose.lo[..., 0]) and np.array_equal(tight.hi[..., 0], loose.hi[..., 0])
+
+
+@hsettings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2 ** 31), n=st.integers(1, 6))
+def test_drawn_polygon_holds_every_slot_box(seed, n):
+    """ReachClaims.polygons (what ``--log full`` draws): for random boxes, headings and empty slots,
+    every corner of every non-empty slot box lies in the vehicle's drawn polygon (within
+    GEOMETRY_TOL: one rotation each way); a vehicle with no non-empty slot is drawn as its centre."""
+    from tm.geometry import halfspaces
+    from tm.reach import ReachClaims
+
+    rng = np.random.default_rng(seed)
+    K = 7
+    a = rng.uniform(-20, 20, (n, K, 2))
+    b = a + rng.uniform(-2, 10, (n, K, 2))  # some inverted: empty slots
+    lo, hi = np.minimum(a, b), b
+    lo[rng.random((n, K)) < 0.3] = np.inf  # empty slots as the claims mark them
+    hi[np.isinf(lo[..., 0])] = -np.inf
+    claims = ReachClaims(rng.uniform(-100, 100, (n, 2)), rng.uniform(-np.pi, np.pi, n), lo, hi)
+    P = claims.polygons()
+    assert P.shape == (n, 4, 2)
+    for i in range(n):
+        full = [k for k in range(K) if np.all(claims.lo[i, k] <= claims.hi[i, k])]
+        if not full:
+            assert np.allclose(P[i], claims.centre[i])
+            continue
+        A, c = halfspaces(P[i])
+        for k in full:
+            assert np.all(claims.world_corners(i, k + 1) @ A.T <= c + 1e-9)
