@@ -40,6 +40,11 @@ changes is where they apply:
   Kept in the gate rather than moving every entry line back by
   the largest such reach (about ``L + 2 T^0 + pad + δ``, 16 m for a bus): only the approaches
   beside a holder's exit road wait, and only while it holds the token;
+* **yield at the hand-out** (:meth:`AuthorityGate._yields`): the next in line lets the zone's
+  other waiters go first when its wide path beyond its stop point meets one of them standing at
+  its stop point and that one's path misses its own: that one does not move until it has the
+  token, and the candidate's claims through the zone would meet it (``grid`` seed 2: bus 84 took
+  C1's token to turn left beside bus 80 at its entry line and never moved again);
 * **corridor**: what the vehicle can hold while its stop point moves from where it is to the
   exit slot: boxes around those waypoints, ``δ/2 + T^0`` along plus ``L/2`` (a position lies
   within ``δ/2`` of a waypoint), ``T^0`` plus ``W/2`` across.  Across, this is the hold region,
@@ -196,6 +201,8 @@ class AuthorityGate(JunctionGate):
         #: over the run: requests withheld because their stop point would stand in a holder's path
         #: (:meth:`_keep_out`)
         self.wide_withheld = 0
+        #: over the run: token hand-outs deferred because the candidate's path meets a waiter (:meth:`_yields`)
+        self.yielded = 0
         self._wide: dict = {}  # (vehicle, zone, waypoint, first) -> its wide path (:meth:`_wide_path`)
         #: how far a requester's standing box may lie beyond its current claim box (m): its stop
         #: point moves by at most δ, plus the largest hold box and a padding allowance
@@ -344,6 +351,44 @@ class AuthorityGate(JunctionGate):
                                                           H[np.minimum(idx + 1, len(H) - 1)])
         self._wide[key] = found = (W[idx] + lo, W[idx] + hi)
         return found
+
+    def _standing(self, fleet: JunctionFleet, row: int) -> tuple[np.ndarray, np.ndarray]:
+        """World box ``(lo, hi)`` (2,) of row ``row`` at rest at its stop point (padded hold box)."""
+        W, H, k = fleet.route(row)
+        idx = np.array([k])
+        lo, hi = self.classes[fleet.family[row]].hold_box(fleet.pad(row, idx), H[idx],
+                                                         H[np.minimum(idx + 1, len(H) - 1)])
+        return W[k] + lo[0], W[k] + hi[0]
+
+    def _beyond_meets(self, fleet: JunctionFleet, row: int, z: int, box) -> bool:
+        """Whether row ``row``'s wide path through zone ``z`` beyond its stop point meets ``box``."""
+        path = self._wide_path(fleet, row, z, fleet.route(row)[2] + 1)
+        if path is None:
+            return False
+        lo, hi = path
+        return bool(np.any(np.all((lo <= box[1]) & (hi >= box[0]), axis=1)))
+
+    def _yields(self, fleet: JunctionFleet, row: int, z: int, waiters: np.ndarray) -> bool:
+        """Row ``row`` lets the other waiters of zone ``z`` go first when its wide path beyond its stop
+        point (:meth:`_wide_path`: the claims it will make through the zone, padded) meets the box of
+        one of them standing at its stop point, and that one's path does not meet ``row``'s (then
+        that one goes first: a vehicle waiting at its entry line does not move until it has the
+        token, and a holder whose next claims meet it would stand inside the guard for good --
+        ``grid`` seed 2: bus 84 took C1's token to turn left beside bus 80 waiting at its entry line,
+        and never moved again).  Vehicles on ``row``'s own route (its queue) do not count."""
+        others = [int(j) for j in waiters if j != row]
+        if not others:
+            return False
+        mine = self._standing(fleet, row)
+        on = self._on_route(fleet, row, np.array(others, dtype=np.intp))
+        for j, q in zip(others, on.tolist()):
+            if q:
+                continue
+            if self._beyond_meets(fleet, row, z, self._standing(fleet, j)) and \
+                    not self._beyond_meets(fleet, j, z, mine):
+                self.yielded += 1
+                return True
+        return False
 
     def _on_route(self, fleet: JunctionFleet, row: int, j: np.ndarray, ahead: int = 0) -> np.ndarray:
         """Which rows ``j`` have their requested stop point (``k + ahead``) on row ``row``'s route

@@ -357,12 +357,19 @@ class JunctionGate:
                     continue
                 if blocked_intr[q]:
                     continue
+                if self._yields(fleet, int(wrow[P[q]]), z, wrow[P[zP == z]]):
+                    continue
                 holders[cid[q]] = (key_q, lo_q, hi_q)
                 allowed[P[q]] = True
                 self.tokens_granted += 1
                 if cid[q] in self.given_back:
                     self.given_back[cid[q]].discard(z)
         return allowed
+
+    def _yields(self, fleet: JunctionFleet, row: int, z: int, waiters: np.ndarray) -> bool:
+        """Whether row ``row``, next in line for zone ``z``'s token, lets the other ``waiters`` of
+        ``z`` (rows) go first this round (never, here)."""
+        return False
 
     def _follows(self, fleet: JunctionFleet, pos: dict, row: int, z: int, leaders: list) -> bool:
         """Whether row ``row`` may take zone ``z``'s token although its corridor meets the corridors

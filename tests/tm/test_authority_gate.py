@@ -542,3 +542,26 @@ def test_a_follower_stays_out_of_the_claims_its_turning_leader_has_still_to_make
     assert asked["F"] and gate.wide_withheld == 0
     gate, asked, _, _ = _turn_scene(k_ask - 1, 7.0)
     assert asked["F"] and gate.wide_withheld == 0
+
+
+def test_a_turning_candidate_lets_a_waiter_beside_its_path_go_first():
+    """The hand-out lock of issue 12 (grid seed 2: bus 84 took C1's token to turn left while bus 80
+    waited at its entry line beside its path; 84's turn claims met 80's standing box and neither
+    moved again), with the toy traffic manager :func:`_toy_traffic`.
+
+    A (truck, turning right from the east arm into the north arm) and B (car, down the north arm's
+    other lane) both stand at their entry lines from step 0; A is first in line (same wait, id
+    order).  A's path up the north arm (x >= -1.2, to y = 17.8) meets B's standing box (x <= -0.5,
+    y 10.75 .. 15.25); B's straight path (x <= 0.3) misses A's standing box on the east arm.  So A
+    yields: B takes the token, passes, and A follows once B's claims have left the guard.  Without
+    :meth:`AuthorityGate._yields` A takes the token, the manager denies its claims up the north arm
+    (they meet B standing) and B waits for A's token: neither arrives."""
+    routes = {"A": _right_turn_east_to_north(), "B": _route(*SOUTH)}
+    family, reach = {"A": "truck", "B": "narrow"}, {"truck": TRUCK, "narrow": NARROW}
+    gate = AuthorityGate([J], {"narrow": NARROW, "truck": TRUCK})
+    entry = {v: int(gate.intervals(Scene({}, routes={v: routes[v]}, family=family, reach=reach).fleet(), 0)[1][0])
+             for v in routes}
+    k, last = _toy_traffic(gate, routes, family, reach, {v: entry[v] - 1 for v in routes}, steps=200)
+    W_a, W_b = routes["A"][0], routes["B"][0]
+    assert W_a[k["A"], 1] > 40.0 and W_b[k["B"], 1] < -20.0, (k, last)
+    assert gate.yielded > 0
