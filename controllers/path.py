@@ -73,10 +73,12 @@ def _merge_collinear(P: np.ndarray, tol: float) -> np.ndarray:
     while j < n - 1:
         d = P[j + 1] - P[a]
         L = float(np.hypot(d[0], d[1]))
-        mid = P[a + 1:j + 1] - P[a]
-        t = mid @ d / L
-        off = np.abs(mid[:, 0] * d[1] - mid[:, 1] * d[0]) / L
-        ok = bool(np.all(off <= tol) and np.all(t > 0.0) and np.all(t < L) and np.all(np.diff(t) > 0.0))
+        ok = L > tol  # a route back onto its anchor is a reversal
+        if ok:
+            mid = P[a + 1:j + 1] - P[a]
+            t = mid @ d / L
+            off = np.abs(mid[:, 0] * d[1] - mid[:, 1] * d[0]) / L
+            ok = bool(np.all(off <= tol) and np.all(t > 0.0) and np.all(t < L) and np.all(np.diff(t) > 0.0))
         if not ok:  # j is a real vertex
             keep.append(j)
             a = j

@@ -70,6 +70,9 @@ def test_duplicates_merge_reversals_do_not():
     assert f.n_segments == 1 and f.length == pytest.approx(2.0, abs=TOL)
     r = PathFrame([[0, 0], [2, 0], [1, 0]])  # a reversal is a kink (180 degrees), never merged
     assert r.n_segments == 2 and abs(abs(r.turn[0]) - np.pi) < 1e-12
+    with np.errstate(all="raise"):  # back onto the first point: no division by a zero chord
+        b = PathFrame([[0, 0], [1, 0], [0, 0]])
+    assert b.n_segments == 2 and b.length == pytest.approx(2.0)
 
 
 def test_the_frame_is_immutable():
