@@ -94,3 +94,13 @@ REACH_LOOKUP_MARGIN = 1e-9
 #: muvsim did not plan.  SUMO keeps the exact position (measured: to ~1e-14 m); 1 cm absorbs
 #: SUMO's own position validation on lane ends.
 POSE_TOL_M = 0.01
+
+#: Consecutive route points closer than this are one point when a path frame is built
+#: (``controllers/path.py``; the same figure as the waypoint conditioning's duplicate test) (m).
+PATH_DUP_TOL_M = 1e-9
+
+#: A path frame (``controllers/path.py``) merges consecutive segments into one when every point
+#: between the two ends lies within this of the chord between them (m).  Subsampled straights
+#: deviate from their line by round-off only (~1e-13 m on coordinates of ~1e3 m), so they merge;
+#: every input point lies within this of the frame's polyline.
+PATH_COLLINEAR_TOL_M = 1e-9

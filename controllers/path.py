@@ -1,0 +1,248 @@
+"""Path frame: coordinates along a route polyline (the road-frame classes' planned plant frame).
+
+A vehicle's state in path coordinates is ``(s, n, v_s, v_n)``: ``s`` the arc length along its
+route polyline, ``n`` the signed lateral offset (left of the direction of travel positive).  The
+controller and its sets need not change (along factor = ``s``, across = ``n``, heading 0
+everywhere); only the map to the world does, and that map is this module.
+
+Construction
+    :class:`PathFrame` takes the route polyline ``W`` (P, 2): consecutive waypoints.  Points
+    must be finite; consecutive points closer than ``PATH_DUP_TOL_M`` are one; fewer than two
+    distinct points is an error (:class:`PathError`).  Collinear runs are merged: a vertex goes
+    when it and every vertex merged before it since the last kept one lie within
+    ``PATH_COLLINEAR_TOL_M`` of the chord from that kept vertex to the next point, in order along
+    it (a reversal is a kink, never merged).  So every input point lies within
+    ``PATH_COLLINEAR_TOL_M`` of the frame's polyline, and a subsampled straight is one segment.
+
+The map
+    Segment ``i`` runs from vertex ``V_i`` (arc ``S_i``) to ``V_{i+1}`` with unit tangent ``T_i``,
+    left normal ``N_i`` and heading ``theta_i``.  A parameter ``s`` belongs to the segment that
+    *leaves* the last vertex at or before it (right-continuous: ``S_i <= s < S_{i+1}``); ``s < 0``
+    to the first segment and ``s >= S_end`` to the last, both extended as straight lines beyond
+    the route's ends.  Then
+
+        to_world(s, n) = V_i + (s - S_i) T_i + n N_i,    body heading = theta_i.
+
+Kinks (the decision)
+    The heading is piecewise constant: no smoothing, so a footprint is always a rectangle aligned
+    with one segment, and the claim cover (:mod:`tm.path_cover`) is exact per segment.
+    For ``n = 0`` the world point is continuous in ``s`` (it runs along the polyline).  For
+    ``n != 0`` it jumps where ``s`` passes a vertex that turns by ``theta``: from ``V + n N_i`` to
+    ``V + n N_{i+1}``, a distance of exactly ``|n| 2 sin(theta / 2)`` (a car's cruising across
+    tube, ``|n| <= 0.17 m``, at a 45 degree kink: 0.13 m); the body turns by ``theta`` at once,
+    and a body point at ``(a, b)`` from the centre (along, left) jumps by
+    ``|(a, n + b)| 2 sin(theta / 2)``, at most ``sqrt((L/2)^2 + (|n| + W/2)^2) 2 sin(theta / 2)``
+    (:meth:`PathFrame.kink_jump_bound`).  Soundness does not suffer: a claim covers every pose of
+    its closed ``s``-interval, on both sides of each vertex (:func:`tm.path_cover.path_box_cover`).
+    On the inside of a kink the offset lines of the two segments cross (world points there have
+    two path coordinates); on the outside a wedge of angle ``theta`` at offset ``|n|`` has none.
+
+Projection
+    :meth:`PathFrame.to_path` projects world points onto the nearest segment among those within a
+    window of arc around a hint ``s_hint`` (the vehicle's last ``s``), which picks the right
+    branch where a route passes near itself.  ``to_path(to_world(s, n)) == (s, n)`` wherever
+    ``(s, n)`` has one preimage: ``s`` farther than ``|n| tan(theta / 2)`` from the kinks (and
+    farther than ``|n|`` suffices for ``theta <= 90`` degrees).  A point with none (the outside
+    wedge of a kink) gets the vertex's ``s`` and its signed distance from the vertex.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from controllers.tolerances import PATH_COLLINEAR_TOL_M, PATH_DUP_TOL_M
+
+__all__ = ["PathFrame", "PathError", "DEFAULT_PROJECTION_WINDOW_M"]
+
+#: Arc window (m) either side of ``s_hint`` whose segments :meth:`PathFrame.to_path` considers:
+#: a vehicle moves at most ~1.4 m a step (13.89 m/s, 0.1 s), so a hint one step old is well inside.
+DEFAULT_PROJECTION_WINDOW_M = 10.0
+
+
+class PathError(ValueError):
+    """A polyline that cannot make a path frame, or path coordinates that are not numbers."""
+
+
+def _merge_collinear(P: np.ndarray, tol: float) -> np.ndarray:
+    """Indices of the vertices of ``P`` (distinct consecutive points) kept after merging collinear
+    runs: a run ``a .. e`` becomes one segment when every point between lies within ``tol`` of the
+    chord ``P[a] -> P[e]`` and projects inside it, in increasing order."""
+    keep = [0]
+    a, n = 0, len(P)
+    j = 1  # candidate vertex to drop: the chord a -> j + 1 must carry a + 1 .. j
+    while j < n - 1:
+        d = P[j + 1] - P[a]
+        L = float(np.hypot(d[0], d[1]))
+        ok = L > tol  # a route back onto its anchor is a reversal
+        if ok:
+            mid = P[a + 1:j + 1] - P[a]
+            t = mid @ d / L
+            off = np.abs(mid[:, 0] * d[1] - mid[:, 1] * d[0]) / L
+            ok = bool(np.all(off <= tol) and np.all(t > 0.0) and np.all(t < L) and np.all(np.diff(t) > 0.0))
+        if not ok:  # j is a real vertex
+            keep.append(j)
+            a = j
+        j += 1
+    keep.append(n - 1)
+    return np.asarray(keep, dtype=np.intp)
+
+
+class PathFrame:
+    """Path coordinates along a route polyline (module notes).  Immutable; arrays read-only.
+
+    Parameters
+    ----------
+    W : array_like, shape (P, 2)
+        The route polyline: consecutive waypoints (world, m).
+
+    Attributes
+    ----------
+    vertices : ndarray, shape (M + 1, 2)
+        The polyline after duplicate points and collinear runs are merged (M segments).
+    arc : ndarray, shape (M + 1,)
+        Arc length of each vertex, from 0.
+    heading : ndarray, shape (M,)
+        Heading of each segment (rad, counter-clockwise from +x).
+    tangent, normal : ndarray, shape (M, 2)
+        Unit tangent and left normal of each segment.
+    turn : ndarray, shape (M - 1,)
+        Signed turn at each interior vertex (rad, in (-pi, pi], left positive).
+
+    Raises
+    ------
+    PathError
+        ``W`` not (P, 2), not finite, or fewer than two distinct points.
+    """
+
+    __slots__ = ("vertices", "arc", "heading", "tangent", "normal", "turn", "_inner")
+
+    def __init__(self, W):
+        P = np.asarray(W, dtype=float)
+        if P.ndim != 2 or P.shape[1] != 2:
+            raise PathError(f"path polyline: must be (P, 2), got shape {P.shape}")
+        bad = ~np.isfinite(P).all(axis=1)
+        if bad.any():
+            raise PathError(f"path polyline: point {int(np.flatnonzero(bad)[0])} is not finite: "
+                            f"{P[np.flatnonzero(bad)[0]].tolist()}")
+        if len(P):
+            step = np.hypot(*np.diff(P, axis=0).T) if len(P) > 1 else np.zeros(0)
+            P = P[np.concatenate([[True], step > PATH_DUP_TOL_M])]
+        if len(P) < 2:
+            raise PathError("path polyline: needs at least two distinct points "
+                            f"(farther apart than {PATH_DUP_TOL_M} m)")
+        P = P[_merge_collinear(P, PATH_COLLINEAR_TOL_M)]
+        d = np.diff(P, axis=0)
+        seg = np.hypot(d[:, 0], d[:, 1])
+        T = d / seg[:, None]
+        h = np.arctan2(T[:, 1], T[:, 0])
+        turn = np.arctan2(T[:-1, 0] * T[1:, 1] - T[:-1, 1] * T[1:, 0], np.einsum("ij,ij->i", T[:-1], T[1:]))
+        arrays = dict(vertices=P, arc=np.concatenate([[0.0], np.cumsum(seg)]), heading=h, tangent=T,
+                      normal=np.column_stack([-T[:, 1], T[:, 0]]), turn=turn)
+        for k, a in arrays.items():
+            a = np.ascontiguousarray(a)
+            a.flags.writeable = False
+            object.__setattr__(self, k, a)
+        inner = np.ascontiguousarray(self.arc[1:-1])  # interior vertices' arc: segment lookup
+        inner.flags.writeable = False
+        object.__setattr__(self, "_inner", inner)
+
+    def __setattr__(self, name, value):
+        raise AttributeError("PathFrame is immutable")
+
+    def __repr__(self) -> str:
+        return f"PathFrame({self.n_segments} segments, {self.length:.3f} m)"
+
+    # ------------------------------------------------------------------ basics
+    @property
+    def length(self) -> float:
+        """Arc length of the polyline (m)."""
+        return float(self.arc[-1])
+
+    @property
+    def n_segments(self) -> int:
+        return len(self.heading)
+
+    def segment(self, s) -> np.ndarray:
+        """Segment index of each ``s`` (right-continuous at vertices; ends extended), same shape."""
+        return np.searchsorted(self._inner, np.asarray(s, dtype=float), side="right")
+
+    def kink_jump_bound(self, n, length: float = 0.0, width: float = 0.0) -> float:
+        """The largest world jump (m), over this path's kinks, of a body point of a ``length`` x
+        ``width`` footprint centred at lateral offset ``n`` as ``s`` passes a vertex:
+        ``sqrt((L/2)^2 + (|n| + W/2)^2) 2 sin(theta / 2)`` (the centre: ``|n| 2 sin(theta / 2)``)."""
+        if not len(self.turn):
+            return 0.0
+        r = np.hypot(0.5 * float(length), np.abs(float(n)) + 0.5 * float(width))
+        return float(r * 2.0 * np.sin(0.5 * np.abs(self.turn).max()))
+
+    # ------------------------------------------------------------------ maps
+    def to_world(self, s, n) -> tuple[np.ndarray, np.ndarray]:
+        """World centres and body headings of path coordinates ``(s, n)`` (broadcast together).
+
+        Returns
+        -------
+        xy : ndarray, shape (*shape, 2)
+        heading : ndarray, shape
+            The heading of the segment ``s`` lies on (:meth:`segment`).
+
+        Raises
+        ------
+        PathError
+            On a coordinate that is not finite.
+        """
+        s, n = np.broadcast_arrays(np.asarray(s, dtype=float), np.asarray(n, dtype=float))
+        if not (np.isfinite(s).all() and np.isfinite(n).all()):
+            raise PathError("to_world: s and n must be finite")
+        i = self.segment(s)
+        a = s - self.arc[i]
+        xy = self.vertices[i] + a[..., None] * self.tangent[i] + n[..., None] * self.normal[i]
+        return xy, self.heading[i]
+
+    def to_path(self, xy, s_hint, window: float = DEFAULT_PROJECTION_WINDOW_M) -> tuple[np.ndarray, np.ndarray]:
+        """Path coordinates ``(s, n)`` of world points ``xy`` (m, 2): the projection onto the
+        nearest segment among those meeting ``[s_hint - window, s_hint + window]`` (the first
+        and last segments extended beyond the route's ends; ties to the lower segment).
+
+        Parameters
+        ----------
+        xy : array_like, shape (m, 2)
+        s_hint : array_like, shape (m,) or scalar
+            Arc length near each point (e.g. the vehicle's last ``s``).
+        window : float
+            Half-width (m, >= 0) of the arc window searched.
+
+        Raises
+        ------
+        PathError
+            On a bad shape or a value that is not finite.
+        """
+        X = np.asarray(xy, dtype=float)
+        if X.ndim != 2 or X.shape[1] != 2:
+            raise PathError(f"to_path: xy must be (m, 2), got shape {X.shape}")
+        h = np.broadcast_to(np.asarray(s_hint, dtype=float), (len(X),))
+        if not (np.isfinite(X).all() and np.isfinite(h).all()):
+            raise PathError("to_path: xy and s_hint must be finite")
+        if not (np.isfinite(window) and window >= 0):
+            raise PathError(f"to_path: window must be a finite distance >= 0 m, got {window!r}")
+        M = self.n_segments
+        i0 = np.searchsorted(self._inner, h - window, side="left")   # first segment ending at or after
+        i1 = np.searchsorted(self._inner, h + window, side="right")  # last segment starting at or before
+        width = int((i1 - i0).max()) + 1 if len(X) else 1
+        cand = i0[:, None] + np.arange(width)[None, :]               # (m, c)
+        valid = cand <= i1[:, None]
+        cand = np.minimum(cand, M - 1)
+        V, T = self.vertices[cand], self.tangent[cand]
+        rel = X[:, None, :] - V
+        t = np.einsum("mcj,mcj->mc", rel, T)
+        seg_len = self.arc[cand + 1] - self.arc[cand]
+        lo = np.where(cand == 0, -np.inf, 0.0)
+        hi = np.where(cand == M - 1, np.inf, seg_len)
+        t = np.clip(t, lo, hi)
+        foot = rel - t[..., None] * T
+        dist = np.hypot(foot[..., 0], foot[..., 1])
+        dist = np.where(valid, dist, np.inf)
+        best = np.argmin(dist, axis=1)
+        r = np.arange(len(X))
+        seg, tb, fb, db = cand[r, best], t[r, best], foot[r, best], dist[r, best]
+        side = self.tangent[seg, 0] * fb[:, 1] - self.tangent[seg, 1] * fb[:, 0]
+        return self.arc[seg] + tb, np.where(side < 0.0, -db, db)

@@ -1,0 +1,162 @@
+"""World boxes that soundly cover path-frame claims (:mod:`controllers.path`).
+
+In the path frame a claim slot is an interval box ``[s_lo, s_hi] x [n_lo, n_hi]`` of path
+coordinates plus the footprint: the rectangle ``length x width`` centred at ``to_world(s, n)`` with
+the heading of the segment ``s`` lies on.  :func:`path_box_cover` lays one oriented world box per
+path segment that the closed ``s``-interval meets:
+
+    segment i, in its own frame (origin V_i, axes T_i, N_i):
+    along  [a_i - S_i - L/2, b_i - S_i + L/2],   a_i = max(s_lo, S_i), b_i = min(s_hi, S_{i+1}),
+    across [n_lo - W/2, n_hi + W/2],
+
+with ``S_0 = -inf`` and ``S_M = +inf`` (the frame extends its first and last segments beyond the
+route's ends).
+
+Sound, and exact per segment: every ``(s, n)`` of the interval with ``s`` in ``[a_i, b_i]`` places
+its footprint with heading ``theta_i`` at ``V_i + (s - S_i) T_i + n N_i``, i.e. the rectangle
+``[s - S_i -+ L/2] x [n -+ W/2]`` of segment ``i``'s frame, which lies in box ``i``; every ``s`` of
+the interval lies in some ``[a_i, b_i]``.  The ranges are closed, so a vertex inside the interval is
+covered with both headings: the pose just before it (heading ``theta_i``, the world limit from the
+left) and at it (``theta_{i+1}``).
+
+The body overhang at a kink.  A body does not bend with the path: just before a vertex its front
+reaches ``L/2`` beyond the vertex along the *old* tangent, outside the next segment's box (a 45
+degree left kink, a car at ``n = 0``: the front-right corner lies 2.4 m right of the next segment's
+axis, 0.9 m allowed).  Box ``i`` therefore keeps its full ``+- L/2`` past ``b_i`` and before
+``a_i`` even where the interval goes on round the kink (boxes overlap there).  The union of the
+boxes is then exactly the closure of the footprints' union, so the cover costs no area.  Clipping a box to
+its segment's arc range, or laying the footprint along the path as ``[s_lo - L/2, s_hi + L/2]``,
+would miss that corner (``tests/tm/test_path_cover.py`` shows the check catching it).
+
+Boxes per interval: one per segment met; a straight is one segment (the frame merges collinear
+runs), a curve sampled every ``delta`` gives about ``(s_hi - s_lo) / delta + 1``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from controllers.path import PathError, PathFrame
+from tm.geometry import rectangles
+
+__all__ = ["PathBoxes", "path_box_cover", "path_footprints", "points_in_boxes"]
+
+
+@dataclass(frozen=True, eq=False)
+class PathBoxes:
+    """Oriented world boxes covering path intervals; the boxes of each interval are contiguous.
+
+    Attributes
+    ----------
+    owner : ndarray of int, shape (q,)
+        The interval (flat index into the broadcast inputs, C order) each box covers; increasing.
+    segment : ndarray of int, shape (q,)
+        Path segment of each box.
+    centre : ndarray, shape (q, 2)
+    heading : ndarray, shape (q,)
+        Box axes: along ``heading`` and across it (rad).
+    half : ndarray, shape (q, 2)
+        Half extents along and across.
+    start, count : ndarray of int, shape (m,)
+        First box and number of boxes of each interval (0 for an empty interval).
+    shape : tuple
+        Shape of the broadcast inputs (``m`` = its product).
+    """
+
+    owner: np.ndarray
+    segment: np.ndarray
+    centre: np.ndarray
+    heading: np.ndarray
+    half: np.ndarray
+    start: np.ndarray
+    count: np.ndarray
+    shape: tuple
+
+    def __len__(self) -> int:
+        return len(self.owner)
+
+    def polygons(self) -> np.ndarray:
+        """Corners (q, 4, 2), counter-clockwise (:func:`tm.geometry.rectangles`)."""
+        return self.centre[:, None, :] + rectangles(self.heading, 2.0 * self.half[:, 0], 2.0 * self.half[:, 1])
+
+
+def _flat(name, a, shape) -> np.ndarray:
+    a = np.broadcast_to(np.asarray(a, dtype=float), shape).ravel()
+    if not np.isfinite(a).all():
+        raise PathError(f"path_box_cover: {name} must be finite")
+    return a
+
+
+def path_box_cover(frame: PathFrame, s_lo, s_hi, n_lo, n_hi, length, width) -> PathBoxes:
+    """Oriented world boxes whose union holds the footprint of every ``(s, n)`` in
+    ``[s_lo, s_hi] x [n_lo, n_hi]`` (module notes); vectorised over intervals (all arguments
+    broadcast together; ``length``, ``width`` per interval or scalars).
+
+    An interval with ``s_lo > s_hi`` or ``n_lo > n_hi`` is empty and gets no box (as an empty
+    claim slot, which never conflicts).
+
+    Raises
+    ------
+    PathError
+        A value that is not finite, or a negative length or width.
+    """
+    shape = np.broadcast_shapes(*(np.shape(a) for a in (s_lo, s_hi, n_lo, n_hi, length, width)))
+    sl, sh = _flat("s_lo", s_lo, shape), _flat("s_hi", s_hi, shape)
+    nl, nh = _flat("n_lo", n_lo, shape), _flat("n_hi", n_hi, shape)
+    L, W = _flat("length", length, shape), _flat("width", width, shape)
+    if (L < 0).any() or (W < 0).any():
+        raise PathError("path_box_cover: length and width must be >= 0")
+    m, M = sl.size, frame.n_segments
+    inner = frame.arc[1:-1]
+    ok = (sl <= sh) & (nl <= nh)
+    i0 = np.searchsorted(inner, sl, side="left")    # first segment with S_{i+1} >= s_lo
+    i1 = np.searchsorted(inner, sh, side="right")   # last segment with S_i <= s_hi
+    count = np.where(ok, i1 - i0 + 1, 0)
+    start = np.concatenate([[0], np.cumsum(count)[:-1]]).astype(np.intp) if m else np.zeros(0, np.intp)
+    owner = np.repeat(np.arange(m), count)
+    seg = i0[owner] + (np.arange(len(owner)) - start[owner])
+    S0 = np.where(seg == 0, -np.inf, frame.arc[seg])
+    S1 = np.where(seg == M - 1, np.inf, frame.arc[seg + 1])
+    a = np.maximum(sl[owner], S0) - frame.arc[seg]
+    b = np.minimum(sh[owner], S1) - frame.arc[seg]
+    hx = 0.5 * (b - a) + 0.5 * L[owner]
+    hy = 0.5 * (nh[owner] - nl[owner]) + 0.5 * W[owner]
+    mx, my = 0.5 * (a + b), 0.5 * (nl[owner] + nh[owner])
+    centre = frame.vertices[seg] + mx[:, None] * frame.tangent[seg] + my[:, None] * frame.normal[seg]
+    return PathBoxes(owner=owner, segment=seg, centre=centre, heading=frame.heading[seg].copy(),
+                     half=np.column_stack([hx, hy]), start=start, count=count, shape=shape)
+
+
+def path_footprints(frame: PathFrame, s, n, length, width) -> np.ndarray:
+    """Footprint corners (m, 4, 2) of bodies at path coordinates ``(s, n)`` (1-D, broadcast):
+    ``length x width`` rectangles centred at ``to_world(s, n)`` with the segment's heading."""
+    s, n = np.broadcast_arrays(np.atleast_1d(np.asarray(s, dtype=float)), np.asarray(n, dtype=float))
+    xy, h = frame.to_world(s.ravel(), n.ravel())
+    L = np.broadcast_to(np.asarray(length, dtype=float), h.shape)
+    W = np.broadcast_to(np.asarray(width, dtype=float), h.shape)
+    return xy[:, None, :] + rectangles(h, L, W)
+
+
+def points_in_boxes(boxes: PathBoxes, owner, points, tol: float) -> np.ndarray:
+    """For points ``points`` (p, k, 2), each group of ``k`` points tested against the boxes of
+    interval ``owner[p]``: (p, c) bool, whether all ``k`` points of group ``p`` lie in box ``c`` of
+    that interval (within ``tol``, m; ``c`` up to the largest box count, padding False).  ``.any(1)``:
+    the group lies in one box; with ``k = 1``, a point inside the union of the interval's boxes."""
+    owner = np.asarray(owner, dtype=np.intp)
+    P = np.asarray(points, dtype=float)
+    cnt = boxes.count[owner]
+    width = int(cnt.max()) if len(cnt) else 0
+    out = np.zeros((len(owner), width), dtype=bool)
+    if not width:
+        return out
+    j = np.arange(width)
+    valid = j[None, :] < cnt[:, None]
+    b = np.where(valid, boxes.start[owner][:, None] + j[None, :], 0)
+    c, s = np.cos(boxes.heading[b]), np.sin(boxes.heading[b])            # (p, c)
+    rel = P[:, None, :, :] - boxes.centre[b][:, :, None, :]              # (p, c, k, 2)
+    u = np.abs(rel[..., 0] * c[..., None] + rel[..., 1] * s[..., None])
+    v = np.abs(-rel[..., 0] * s[..., None] + rel[..., 1] * c[..., None])
+    inside = (u <= boxes.half[b][..., 0, None] + tol) & (v <= boxes.half[b][..., 1, None] + tol)
+    return inside.all(axis=-1) & valid
