@@ -9,7 +9,8 @@ Each table sits in README.md between ``<!-- table:NAME -->`` and ``<!-- /table:N
 everything between the markers is generated (edit the CSV by re-running the benchmark, never
 the README table).  Tables:
 
-* ``traffic``: ``benchmarks/results/traffic.csv`` (``bench_traffic.py``), one row per combination;
+* ``traffic``: ``benchmarks/results/traffic.csv`` (``bench_traffic.py``), one row per driver, muvsim
+  controller and variant (a CSV without a ``controller`` column is the paper controller's);
 * ``scale``: ``benchmarks/results/scale.csv`` (``bench_scale.py``), wall seconds per simulated
   second by component;
 * ``scenarios``: ``benchmarks/results/scenarios.csv`` (``bench_scenarios.py``), one row per SUMO demo
@@ -50,16 +51,23 @@ def _count(v) -> str:
 
 
 def traffic_table(csv: Path = RESULTS / "traffic.csv") -> str:
+    """One row per driver, muvsim controller and variant, means over seeds: arrivals of the demand, then
+    delay and halts over the arrived vehicles, TM stops, collisions and the simulated length of the runs."""
     df = pd.read_csv(csv)
-    head = ("| driver | switching | check | policy | seeds | arrived | delay mean / p95 (s) | halts per vehicle "
-            "| time halted (s) | TM stops | collisions (SUMO / geometric) |")
-    lines = [head, "| " + " | ".join(["---"] * 11) + " |"]
+    if "controller" not in df:
+        df["controller"] = df["driver"].map(lambda d: "paper" if d == "muvsim" else "-")
+    g = lambda r, k: r[k] if k in r else None  # noqa: E731 - a column older CSVs lack: "-"
+    head = ("| driver | controller | switching | check | policy | seeds | arrived / demand | delay mean / p95 (s) "
+            "| halts per vehicle | time halted (s) | TM stops | collisions (SUMO / geometric) | simulated (s) |")
+    lines = [head, "| " + " | ".join(["---"] * 13) + " |"]
     for _, r in df.iterrows():
         driver = "SUMO's drivers" if r["driver"] == "sumo" else r["driver"]
-        lines.append(f"| {driver} | {r['switching']} | {r['check']} | {r['policy']} | {int(r['seeds'])} | "
-                     f"{_count(r['arrived'])} | {_f(r['delay_mean_s'], 1)} / {_f(r['delay_p95_s'], 1)} | "
-                     f"{_f(r['halts_per_vehicle'], 1)} | {_f(r['time_halted_s'], 1)} | {_count(r['tm_stops'])} | "
-                     f"{_count(r['collisions_sumo'])} / {_count(r['collisions_geometric'])} |")
+        lines.append(f"| {driver} | {r['controller']} | {r['switching']} | {r['check']} | {r['policy']} "
+                     f"| {int(r['seeds'])} | {_count(r['arrived'])} / {_count(g(r, 'demand'))} "
+                     f"| {_f(r['delay_mean_s'], 1)} / {_f(r['delay_p95_s'], 1)} "
+                     f"| {_f(r['halts_per_vehicle'], 1)} | {_f(r['time_halted_s'], 1)} | {_count(r['tm_stops'])} "
+                     f"| {_count(r['collisions_sumo'])} / {_count(r['collisions_geometric'])} "
+                     f"| {_count(g(r, 'simulated_s'))} |")
     return "\n".join(lines)
 
 

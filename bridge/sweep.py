@@ -1,9 +1,9 @@
 """``muvsim sweep``: one scenario over seeds and traffic-manager options, run in parallel with Dask.
 
-A sweep is the cross product of its seeds and option values (``tm``, ``check``,
+A sweep is the cross product of its seeds and option values (``controller``, ``tm``, ``check``,
 ``switching``, ``disturbance``, ``solver``, and for SUMO scenarios ``signals`` and
-``pedestrians``, as ``muvsim run --signals / --pedestrians``), plus, with ``baseline=True``, one
-run by SUMO's own drivers per seed.  Every run is a task on a Dask
+``pedestrians``, as ``muvsim run --controller / --signals / --pedestrians``), plus, with
+``baseline=True``, one run by SUMO's own drivers per seed.  Every run is a task on a Dask
 distributed cluster -- a local one started for the sweep (one worker process
 per run at a time, see below) or an existing one given by its scheduler
 address -- and writes its own run directory ``OUT/<label>/`` exactly as
@@ -27,6 +27,13 @@ One simulation per process
     one thread, SUMO runs of one worker process take turns under a
     :class:`distributed.Lock` named after the worker (start such workers with
     ``--nthreads 1`` to use every process).
+
+A fresh process per run (``fresh_process=True``)
+    Each run then goes to a new ``python`` started by the task (:func:`run_one`), which imports
+    this checkout's packages (the ``bridge`` the sweep itself imported), runs the one
+    simulation and exits: runs share nothing (no module state, no growth of resident memory
+    over a long sweep), for ~1.3 s of start-up per run.  A run whose process dies (a crash,
+    a signal) is a failed row naming its exit code and the end of its error output.
 """
 
 from __future__ import annotations
@@ -37,10 +44,12 @@ import json
 import math
 import os
 import re
+import subprocess
 import sys
+import tempfile
 import time
 import traceback
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Iterable, Sequence
 
@@ -49,15 +58,19 @@ import pandas as pd
 from bridge.scenarios import SCENARIOS
 
 __all__ = ["SweepSettingsError", "SweepSettings", "RunSpec", "ROW_COLUMNS", "SUMMARY_KPIS", "VEHICLE_STATS",
-           "COUNT_COLUMNS", "TABLE_COLUMNS", "OPTION_CHOICES", "plan", "run_plan", "sweep", "run_one", "format_table",
-           "is_free_plane", "check_scheduler_address"]
+           "COUNT_COLUMNS", "TABLE_COLUMNS", "OPTION_CHOICES", "CONTROLLER_DEFAULT", "plan", "run_plan", "sweep",
+           "run_one", "format_table", "is_free_plane", "check_scheduler_address", "spec_from_summary",
+           "runs_from_dirs"]
 
 #: Free-plane scenarios (run by :func:`bridge.scenarios.run_scenario`); everything else is SUMO.
 FREE_PLANE = SCENARIOS
 #: What ``muvsim run`` uses for a free-plane scenario's options left out (see ``bridge/cli.py``).
 FREE_PLANE_DEFAULTS = {"tm": "optimal", "check": "union", "switching": "early", "disturbance": "random"}
+#: ``muvsim run --controller``'s default (every scenario): the paper's sets, cost and centred claims.
+CONTROLLER_DEFAULT = "paper"
 #: Valid values of every option that a sweep can vary.
 OPTION_CHOICES = {
+    "controller": ("paper", "authority"),
     "tm": ("greedy", "optimal"),
     "check": ("union", "timed"),
     "switching": ("terminal", "early"),
@@ -88,8 +101,9 @@ VEHICLE_STATS = {"delay_s.mean": "delay_s_mean", "delay_s.p95": "delay_s_p95",
 COUNT_COLUMNS = ("seed", "vehicles_total", "vehicles_arrived", "collisions_sumo", "collisions_geometric",
                  "invariant_violations", "stop_commands", "halt_episodes")
 #: Columns of the sweep table, in order.
-ROW_COLUMNS = (("label", "driver", "seed", "tm", "check", "switching", "disturbance", "solver", "signals",
-                "pedestrians", "duration_s", "run_dir") + SUMMARY_KPIS + tuple(VEHICLE_STATS.values()) + ("complete", "error", "worker"))
+ROW_COLUMNS = (("label", "driver", "seed", "controller", "tm", "check", "switching", "disturbance", "solver",
+                "signals", "pedestrians", "duration_s", "run_dir") + SUMMARY_KPIS + tuple(VEHICLE_STATS.values())
+               + ("complete", "error", "worker"))
 
 
 class SweepSettingsError(ValueError):
@@ -164,6 +178,8 @@ class RunSpec:
         Seed of the run.
     driver : {"muvsim", "sumo"}
         ``"sumo"``: SUMO's own drivers (``--baseline sumo``; SUMO scenarios only).
+    controller : {"paper", "authority"} or None
+        ``muvsim run --controller``; None: ``paper``.  Not for SUMO's own drivers (leave it None).
     tm, check, switching, disturbance : str or None
         Options; None takes the scenario's value.
     solver : {"exact", "daqp", "proxsuite"}
@@ -187,6 +203,7 @@ class RunSpec:
     scenario: str
     seed: int
     driver: str = "muvsim"
+    controller: str | None = None
     tm: str | None = None
     check: str | None = None
     switching: str | None = None
@@ -215,6 +232,13 @@ class RunSpec:
             v = getattr(self, name)
             if v is not None and v not in OPTION_CHOICES[name]:
                 raise _fail(name, f"must be one of {', '.join(OPTION_CHOICES[name])} (or None: the scenario's)", v)
+        if self.controller is not None:
+            if self.controller not in OPTION_CHOICES["controller"]:
+                raise _fail("controller", f"must be one of {', '.join(OPTION_CHOICES['controller'])} (or None: "
+                                          f"{CONTROLLER_DEFAULT})", self.controller)
+            if self.driver == "sumo":
+                raise _fail("controller", "SUMO's own drivers (driver 'sumo') use none of muvsim's options "
+                                          "(leave it None)", self.controller)
         if self.solver not in OPTION_CHOICES["solver"]:
             raise _fail("solver", f"must be one of {', '.join(OPTION_CHOICES['solver'])}", self.solver)
         for name in SUMO_ONLY_DEFAULTS:
@@ -250,8 +274,9 @@ class RunSpec:
         SUMO runs leave them None (``run_sumo`` takes the scenario's).
         """
         opts = argparse.Namespace(
-            scenario=self.scenario, seed=self.seed, tm=self.tm, check=self.check, switching=self.switching,
-            disturbance=self.disturbance, solver=self.solver, duration=self.duration_s,
+            scenario=self.scenario, seed=self.seed, controller=self.controller or CONTROLLER_DEFAULT, tm=self.tm,
+            check=self.check, switching=self.switching, disturbance=self.disturbance, solver=self.solver,
+            duration=self.duration_s,
             baseline="sumo" if self.driver == "sumo" else None, gui=False, quiet=True, log=self.log,
             plots=False, vclass=self.vclass, vehicles=self.vehicles, signals=self.signals,
             pedestrians=self.pedestrians)
@@ -264,13 +289,15 @@ class RunSpec:
 
 def _nan_row(spec: RunSpec, run_dir: Path) -> dict:
     row = {c: math.nan for c in ROW_COLUMNS}
-    row.update(label=spec.label, driver=spec.driver, seed=spec.seed, tm=spec.tm, check=spec.check,
+    row.update(label=spec.label, driver=spec.driver, seed=spec.seed,
+               controller=spec.controller or (CONTROLLER_DEFAULT if spec.driver == "muvsim" else None),
+               tm=spec.tm, check=spec.check,
                switching=spec.switching, disturbance=spec.disturbance, solver=spec.solver,
                signals=spec.signals, pedestrians=spec.pedestrians,
                duration_s=spec.duration_s, run_dir=str(run_dir), complete=False, error=None, worker=None)
     if spec.driver == "sumo":  # SUMO's drivers use none of muvsim's options
-        row.update(tm=None, check=None, switching=None, disturbance=None, solver=None, signals=None,
-                   pedestrians=None)
+        row.update(controller=None, tm=None, check=None, switching=None, disturbance=None, solver=None,
+                   signals=None, pedestrians=None)
     return row
 
 
@@ -328,25 +355,69 @@ def _execute(spec: RunSpec, run_dir: Path) -> dict:
     return run_scenario(spec.scenario, run_dir, spec.options())
 
 
-def run_one(spec: RunSpec, out: str | os.PathLike) -> dict:
+#: The code a fresh run process executes (``python -c``): this checkout's packages first on the path.
+_CHILD_CODE = ("import sys; sys.path.insert(0, sys.argv[1]); from bridge.sweep import _child_main; "
+               "sys.exit(_child_main(sys.argv[2:]))")
+#: Characters of a dead run process's error output kept in its row's ``error``.
+_CHILD_ERR_CHARS = 600
+
+
+def _child_main(argv: Sequence[str]) -> int:
+    """Entry of a fresh run process: ``SPEC_JSON OUT ROW_PATH``; runs the spec, writes its row as JSON."""
+    spec_json, out, row_path = argv
+    row = run_one(RunSpec(**json.loads(spec_json)), out)
+    Path(row_path).write_text(json.dumps(row, default=str), encoding="utf-8")
+    return 0
+
+
+def _run_fresh(spec: RunSpec, out: Path) -> dict:
+    """:func:`run_one` of ``spec`` in a new Python process; its row (a failed row if the process died)."""
+    root = str(Path(__file__).resolve().parents[1])  # the checkout whose bridge is running here
+    with tempfile.TemporaryDirectory(prefix="muvsim-sweep-run-") as tmp:
+        row_path = Path(tmp) / "row.json"
+        proc = subprocess.run([sys.executable, "-c", _CHILD_CODE, root, json.dumps(asdict(spec)), str(out),
+                               str(row_path)], stdin=subprocess.DEVNULL, capture_output=True, text=True)
+        if proc.returncode == 0 and row_path.exists():
+            return json.loads(row_path.read_text(encoding="utf-8"))
+    row = _nan_row(spec, out / spec.label)
+    sfile = out / spec.label / "summary.json"
+    if sfile.exists():  # the figures up to where it died (summary.json is rewritten every simulated minute)
+        try:
+            row = _row_from_run(spec, out / spec.label, json.loads(sfile.read_text()))
+            row["complete"] = False
+        except (OSError, ValueError):
+            pass
+    err = (proc.stderr or "").strip()[-_CHILD_ERR_CHARS:]
+    row["error"] = f"run process exited with code {proc.returncode}" + (f": {err}" if err else "")
+    return row
+
+
+def run_one(spec: RunSpec, out: str | os.PathLike, fresh_process: bool = False) -> dict:
     """Run one sweep run into ``out/<label>`` and return its row; never raises for a failed run.
 
     Called on a Dask worker (or directly).  On a worker with more than one thread, SUMO runs of
-    that worker process take turns under a :class:`distributed.Lock` named after the worker.
+    that worker process take turns under a :class:`distributed.Lock` named after the worker
+    (not with ``fresh_process``: each simulation then has a process of its own).
 
     Parameters
     ----------
     spec : RunSpec
     out : path-like
         The sweep's output directory.
+    fresh_process : bool
+        Run it in a new Python process (this checkout's packages) instead of this one.
 
     Returns
     -------
     dict
         Keys :data:`ROW_COLUMNS`.
     """
-    run_dir = Path(out) / spec.label
     worker, nthreads = _worker_and_threads()
+    if fresh_process:
+        row = _run_fresh(spec, Path(out).expanduser().absolute())
+        row["worker"] = None if worker is None else worker.address
+        return row
+    run_dir = Path(out) / spec.label
     try:
         if spec.uses_sumo and worker is not None and nthreads > 1:
             from distributed import Lock
@@ -386,8 +457,9 @@ class SweepSettings:
     out : Path
         Output directory: ``OUT/<label>/`` per run and ``OUT/sweep.csv``.  On an existing cluster it must
         be a path the workers can write (a shared file system) and the scenario a path they can read.
-    tm, check, switching, disturbance, solver, signals, pedestrians : tuple of str
-        Values of each option to sweep (see :data:`OPTION_CHOICES`); ``solver`` defaults to ``("exact",)``.
+    controller, tm, check, switching, disturbance, solver, signals, pedestrians : tuple of str
+        Values of each option to sweep (see :data:`OPTION_CHOICES`); ``solver`` defaults to ``("exact",)``,
+        ``controller`` to ``("paper",)`` (``muvsim run --controller``'s default, every scenario).
         ``signals`` and ``pedestrians`` mean what ``muvsim run --signals / --pedestrians`` do (defaults
         ``obey`` and ``guard``); SUMO scenarios only (the baseline runs are SUMO's drivers either way).
     duration_s : float or None
@@ -405,6 +477,9 @@ class SweepSettings:
         Vehicle class of the free-plane ``single``, ``swap``, ``crossing``.
     vehicles : int
         Vehicles of ``swap`` and ``crossing``.
+    fresh_process : bool
+        Each run in a new Python process started by its task (see the module's notes) instead of in
+        the worker process itself: runs independent of each other, memory not growing over a sweep.
 
     Raises
     ------
@@ -415,6 +490,7 @@ class SweepSettings:
     scenario: str
     seeds: tuple[int, ...]
     out: Path
+    controller: tuple[str, ...] = ()
     tm: tuple[str, ...] = ()
     check: tuple[str, ...] = ()
     switching: tuple[str, ...] = ()
@@ -429,6 +505,7 @@ class SweepSettings:
     scheduler: str | None = None
     vclass: str = "paper-a"
     vehicles: int = 8
+    fresh_process: bool = False
     _defaults: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -483,6 +560,8 @@ class SweepSettings:
             raise _fail("vclass", "must be a vehicle class name", self.vclass)
         if not _is_int(self.vehicles) or self.vehicles < 1:
             raise _fail("vehicles", "must be an integer >= 1", self.vehicles)
+        if not isinstance(self.fresh_process, bool):
+            raise _fail("fresh_process", "must be True or False", self.fresh_process)
 
     def _check_scenario(self) -> None:
         from sumo_nets.scenario import ScenarioError, builtin_scenarios, load_scenario
@@ -495,7 +574,7 @@ class SweepSettings:
                         + ") or a path to a .toml or .sumocfg file", self.scenario)
         if is_free_plane(s):
             object.__setattr__(self, "scenario", s)
-            object.__setattr__(self, "_defaults", dict(FREE_PLANE_DEFAULTS))
+            object.__setattr__(self, "_defaults", {"controller": CONTROLLER_DEFAULT, **FREE_PLANE_DEFAULTS})
             return
         try:
             loaded = load_scenario(s)
@@ -507,7 +586,8 @@ class SweepSettings:
             s = str(Path(s).expanduser().absolute())  # workers may not share the client's working directory
         object.__setattr__(self, "scenario", s)
         # the scenario's own options (a .sumocfg: Scenario's defaults), used for options not swept
-        object.__setattr__(self, "_defaults", {**{n: getattr(loaded, n) for n in FREE_PLANE_DEFAULTS},
+        object.__setattr__(self, "_defaults", {"controller": CONTROLLER_DEFAULT,
+                                               **{n: getattr(loaded, n) for n in FREE_PLANE_DEFAULTS},
                                                **SUMO_ONLY_DEFAULTS})
 
     def option_values(self, name: str) -> tuple:
@@ -532,8 +612,8 @@ def plan(settings: SweepSettings) -> tuple[RunSpec, ...]:
         for combo in itertools.product(*(settings.option_values(n) for n in names)):
             opts = dict(zip(names, combo))
             runs.append(RunSpec(label=_label(seed, [(n, opts[n]) for n in varied]), scenario=settings.scenario,
-                                seed=seed, driver="muvsim", tm=opts["tm"], check=opts["check"],
-                                switching=opts["switching"], disturbance=opts["disturbance"],
+                                seed=seed, driver="muvsim", controller=opts["controller"], tm=opts["tm"],
+                                check=opts["check"], switching=opts["switching"], disturbance=opts["disturbance"],
                                 solver=opts["solver"], signals=opts["signals"], pedestrians=opts["pedestrians"],
                                 duration_s=settings.duration_s, log=settings.log,
                                 vclass=settings.vclass, vehicles=settings.vehicles))
@@ -570,7 +650,8 @@ def _progress(i: int, n: int, row: dict, stream) -> None:
 
 
 def run_plan(runs: Sequence[RunSpec], out: str | os.PathLike, *, workers: int | None = None,
-             scheduler: str | None = None, client=None, quiet: bool = True, stream=None) -> pd.DataFrame:
+             scheduler: str | None = None, client=None, quiet: bool = True, stream=None,
+             fresh_process: bool = False) -> pd.DataFrame:
     """Run ``runs`` on Dask, one task each, and return (and write ``out/sweep.csv``) their table.
 
     Parameters
@@ -589,6 +670,8 @@ def run_plan(runs: Sequence[RunSpec], out: str | os.PathLike, *, workers: int | 
         No progress line per finished run.
     stream : file, optional
         Where progress goes (default ``sys.stderr``).
+    fresh_process : bool
+        Each run in a new Python process (:func:`run_one`).
 
     Returns
     -------
@@ -615,8 +698,9 @@ def run_plan(runs: Sequence[RunSpec], out: str | os.PathLike, *, workers: int | 
     rows: dict[str, dict] = {}
 
     def gather(c) -> None:
-        futures = {c.submit(run_one, spec, str(out), key=f"muvsim-run-{spec.label}-{os.getpid()}-{time.time_ns()}",
-                            pure=False): spec for spec in runs}
+        futures = {c.submit(run_one, spec, str(out), fresh_process,
+                            key=f"muvsim-run-{spec.label}-{os.getpid()}-{time.time_ns()}", pure=False): spec
+                   for spec in runs}
         for i, fut in enumerate(as_completed(futures), start=1):
             spec = futures[fut]
             try:
@@ -637,14 +721,63 @@ def run_plan(runs: Sequence[RunSpec], out: str | os.PathLike, *, workers: int | 
         n = min(workers or os.cpu_count() or 1, len(runs))
         with _local_cluster(n) as cluster, Client(cluster) as c:
             gather(c)
-    df = pd.DataFrame([rows[lb] for lb in labels])
+    df = _table([rows[lb] for lb in labels])
+    df.to_csv(out / "sweep.csv", index=False)
+    return df
+
+
+def _table(rows: Sequence[dict]) -> pd.DataFrame:
+    """The sweep table of ``rows`` (in their order): columns :data:`ROW_COLUMNS` first, counts ``Int64``."""
+    df = pd.DataFrame(list(rows))
     cols = list(ROW_COLUMNS) + [c for c in df.columns if c not in ROW_COLUMNS]
     df = df.reindex(columns=cols)
     for c in COUNT_COLUMNS:  # counts stay integers where a run has none (a baseline's stop_commands, a failure)
         df[c] = pd.to_numeric(df[c]).round().astype("Int64")
-    df["complete"] = df["complete"].astype(bool)
-    df.to_csv(out / "sweep.csv", index=False)
+    df["complete"] = df["complete"].fillna(False).astype(bool)
     return df
+
+
+def spec_from_summary(label: str, summary: dict) -> RunSpec:
+    """The :class:`RunSpec` a kept run directory ``label`` was run with, from its ``summary.json``.
+
+    Driver from ``baseline`` (``sumo``: SUMO's own drivers, no muvsim option), seed, and the options
+    the run used (``options``: the scenario's values for those it was not given).
+
+    Raises
+    ------
+    SweepSettingsError
+        The summary does not describe a run (no scenario or seed, or an option out of range).
+    """
+    opts = summary.get("options") or {}
+    driver = "sumo" if summary.get("baseline") == "sumo" else "muvsim"
+    scenario, seed = summary.get("scenario"), summary.get("seed")
+    if not scenario or seed is None:
+        raise SweepSettingsError(f"{label}: summary.json names no scenario or seed")
+    duration = opts.get("duration_s", opts.get("duration"))
+    kw = dict(label=label, scenario=str(scenario), seed=seed, driver=driver, duration_s=duration)
+    if driver == "muvsim":
+        kw.update({n: opts.get(n) for n in ("controller", "tm", "check", "switching", "disturbance")})
+        kw["solver"] = opts.get("solver") or "exact"
+        if not is_free_plane(str(scenario)):
+            kw.update(signals=opts.get("signals"), pedestrians=opts.get("pedestrians"))
+        if opts.get("vclass"):
+            kw["vclass"] = opts["vclass"]
+    return RunSpec(**kw)
+
+
+def runs_from_dirs(out: str | os.PathLike) -> pd.DataFrame:
+    """The sweep table rebuilt from the kept run directories ``out/<label>/`` (each with a
+    ``summary.json``), without running anything: one row per directory, in label order, as
+    :func:`run_plan` returns it (figures from ``summary.json`` and the per-vehicle table)."""
+    out = Path(out).expanduser().absolute()
+    dirs = sorted(d for d in out.iterdir() if d.is_dir() and (d / "summary.json").is_file()) if out.is_dir() else []
+    if not dirs:
+        raise SweepSettingsError(f"out: no run directory (DIR/<label>/summary.json) under {out}")
+    rows = []
+    for d in dirs:
+        summary = json.loads((d / "summary.json").read_text())
+        rows.append(_row_from_run(spec_from_summary(d.name, summary), d, summary))
+    return _table(rows)
 
 
 def sweep(settings: SweepSettings, *, client=None, quiet: bool = True, stream=None) -> pd.DataFrame:
@@ -666,7 +799,7 @@ def sweep(settings: SweepSettings, *, client=None, quiet: bool = True, stream=No
         See :func:`run_plan`.
     """
     return run_plan(plan(settings), settings.out, workers=settings.workers, scheduler=settings.scheduler,
-                    client=client, quiet=quiet, stream=stream)
+                    client=client, quiet=quiet, stream=stream, fresh_process=settings.fresh_process)
 
 
 #: Columns :func:`format_table` prints.

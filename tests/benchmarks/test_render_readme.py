@@ -28,9 +28,15 @@ def test_a_changed_csv_changes_the_table_and_the_check_catches_it(tmp_path):
     csv = tmp_path / "traffic.csv"
     df.to_csv(csv, index=False)
     table = m.traffic_table(csv)
-    assert "| 77 | 123.5 / " in table.splitlines()[2]
+    assert "| 77 / " in table.splitlines()[2] and "| 123.5 / " in table.splitlines()[2]
+    # the README's own traffic table is the rendered one: a hand-edited figure is caught, re-rendering fixes it
+    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    ours = m.traffic_table().splitlines()[2]
+    assert ours in text
+    cells = ours.split(" | ")
+    cells[6] = "1" + cells[6]  # arrived / demand
     readme = tmp_path / "README.md"
-    readme.write_text((ROOT / "README.md").read_text(encoding="utf-8").replace("| 14 | 344.6 /", "| 4 | 306 /", 1))
+    readme.write_text(text.replace(ours, " | ".join(cells), 1), encoding="utf-8")
     assert m.main(["--check", "--readme", str(readme)]) == 1  # a hand-edited figure is caught
     assert m.main(["--readme", str(readme)]) == 0 and m.main(["--check", "--readme", str(readme)]) == 0
 
@@ -61,6 +67,29 @@ def test_the_scenario_table_is_scenarios_csv_and_the_check_catches_a_hand_edit(t
     readme.write_text(text.replace(ours, ours.replace(f"| {first} |", f"| {first} | 1", 1), 1), encoding="utf-8")
     assert m.main(["--check", "--readme", str(readme)]) == 1
     assert m.main(["--readme", str(readme)]) == 0 and m.main(["--check", "--readme", str(readme)]) == 0
+
+
+def test_traffic_rows_name_driver_and_controller_and_older_csvs_render(tmp_path):
+    """A row per driver and controller: SUMO's drivers have no controller or variant; arrivals are of the
+    demand; a CSV from before the controller, demand and simulated columns renders them as paper and "-"."""
+    m = _mod()
+    csv = tmp_path / "traffic.csv"
+    base = dict(scenario="grid", switching="early", check="timed", policy="optimal", seeds=2, complete=2,
+                demand=150.0, arrived=149.5, simulated_s=712.25, delay_mean_s=61.04, delay_p95_s=150.0,
+                halts_per_vehicle=3.0, time_halted_s=40.0, tm_stops=1234.5, collisions_sumo=0.0,
+                collisions_geometric=0.0)
+    pd.DataFrame([{**base, "driver": "muvsim", "controller": "authority"},
+                  {**base, "driver": "sumo", "controller": "-", "switching": "-", "check": "-", "policy": "-",
+                   "arrived": 150.0, "simulated_s": 380.0, "tm_stops": float("nan"),
+                   "collisions_geometric": float("nan")}]).to_csv(csv, index=False)
+    rows = [[c.strip() for c in r.strip("|").split("|")] for r in m.traffic_table(csv).splitlines()[2:]]
+    assert rows[0] == ["muvsim", "authority", "early", "timed", "optimal", "2", "149.5 / 150", "61.0 / 150.0",
+                       "3.0", "40.0", "1234.5", "0 / 0", "712.2"]
+    assert rows[1][:7] == ["SUMO's drivers", "-", "-", "-", "-", "2", "150 / 150"]
+    assert rows[1][10:] == ["-", "0 / -", "380"]
+    pd.read_csv(csv).drop(columns=["controller", "demand", "simulated_s"]).to_csv(csv, index=False)
+    rows = [[c.strip() for c in r.strip("|").split("|")] for r in m.traffic_table(csv).splitlines()[2:]]
+    assert [r[1] for r in rows] == ["paper", "-"] and rows[0][6] == "149.5 / -" and rows[0][12] == "-"
 
 
 def test_a_scenario_with_only_one_driver_renders_dashes_not_a_crash(tmp_path):

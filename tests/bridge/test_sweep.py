@@ -9,7 +9,9 @@ import pytest
 
 from bridge.cli import main
 from bridge.sumo_world import run_sumo
-from bridge.sweep import ROW_COLUMNS, RunSpec, SweepSettings, SweepSettingsError, format_table, plan, run_plan, sweep
+import bridge.sweep
+from bridge.sweep import (ROW_COLUMNS, RunSpec, SweepSettings, SweepSettingsError, format_table, plan, run_one,
+                          run_plan, runs_from_dirs, spec_from_summary, sweep)
 from sumo_nets.generate import write_sumocfg
 
 SMALL = """\
@@ -163,6 +165,10 @@ def test_cli_sweep_bad_settings_exit_2_naming_the_field(tmp_path, capsys):
     (dict(scenario="swap", signals=("ignore",)), "signals"),
     (dict(pedestrians=("off",)), "pedestrians"),
     (dict(scenario="single", pedestrians=("guard",)), "pedestrians"),
+    (dict(controller=("mpc",)), "controller"),
+    (dict(controller="authority"), "controller"),
+    (dict(controller=("paper", "paper")), "controller"),
+    (dict(fresh_process="yes"), "fresh_process"),
 ])
 def test_settings_are_validated_with_the_field_named(change, field, tmp_path):
     kw = dict(scenario="grid", seeds=(1, 2), out=tmp_path)
@@ -241,3 +247,79 @@ def test_printed_table_is_rounded_as_muvsim_run_prints_figures():
     assert lines[1].split() == ["a", "yes", "3", "10", "60.5", "2.7", "7.1", "1.33", "16.33", "11.0"]
     assert lines[2].split() == ["b", "no", "-", "10", "-", "-", "-", "-", "-", "0.3"]
     assert lines[3] == "b: boom"
+
+
+def test_controller_is_a_run_option_paper_by_default(tmp_path):
+    """Every muvsim run names its controller (muvsim run's default, paper, when not swept) and hands it
+    to the run; swept controllers label the runs; SUMO's drivers have none; RunSpec refuses a bad one."""
+    runs = plan(SweepSettings(scenario="grid", seeds=(1,), out=tmp_path, baseline=True))
+    assert [(r.label, r.controller) for r in runs] == [("seed1", "paper"), ("seed1_baseline-sumo", None)]
+    assert vars(runs[0].options())["controller"] == "paper"
+    runs = plan(SweepSettings(scenario="grid", seeds=(1,), out=tmp_path, controller=["paper", "authority"],
+                              check=["timed"]))
+    assert [(r.label, r.controller, r.check) for r in runs] == [("seed1_controller-paper", "paper", "timed"),
+                                                                ("seed1_controller-authority", "authority", "timed")]
+    assert vars(runs[1].options())["controller"] == "authority"
+    assert vars(RunSpec(label="a", scenario="grid", seed=1).options())["controller"] == "paper"
+    assert [r.controller for r in plan(SweepSettings(scenario="single", seeds=(1,), out=tmp_path))] == ["paper"]
+    for kw in (dict(controller="mpc"), dict(driver="sumo", controller="paper")):
+        with pytest.raises(SweepSettingsError, match="^controller: "):
+            RunSpec(label="a", scenario="grid", seed=1, **kw)
+
+
+def test_fresh_process_runs_equal_runs_here_and_rebuild_from_their_directories(small_toml, tmp_path,
+                                                                               monkeypatch):
+    """fresh_process: both controllers and SUMO's drivers, each run in a new Python process, give the
+    figures and per-vehicle tables of the same runs done here; each summary.json records the controller
+    and check asked (timed, not the scenario's union); runs_from_dirs rebuilds the table from the run
+    directories alone.  run_one with fresh_process runs in a new process (a run in this one would fail:
+    _execute is broken here)."""
+    settings = SweepSettings(scenario=str(small_toml), seeds=(1,), out=tmp_path / "sweep", duration_s=20.0,
+                             controller=("paper", "authority"), check=("timed",), baseline=True, workers=2,
+                             fresh_process=True)
+    specs = plan(settings)
+
+    def broken(spec, run_dir):
+        raise RuntimeError("ran in the sweep's own process")
+
+    here = {}
+    for spec in specs:  # the reference: the same specs run in this process
+        here[spec.label] = run_one(spec, tmp_path / "here")
+    df = sweep(settings)
+    assert list(df["label"]) == ["seed1_controller-paper", "seed1_controller-authority", "seed1_baseline-sumo"]
+    assert df["complete"].all(), df["error"].tolist()
+    assert df["worker"].notna().all()
+    for _, row in df.iterrows():
+        ref = here[row["label"]]
+        assert ref["complete"]
+        assert {k: _value(row[k]) for k in DETERMINISTIC} == {k: _value(ref[k]) for k in DETERMINISTIC}
+        pd.testing.assert_frame_equal(pd.read_csv(Path(row["run_dir"]) / "vehicles.csv"),
+                                      pd.read_csv(tmp_path / "here" / row["label"] / "vehicles.csv"))
+        summary = json.loads((Path(row["run_dir"]) / "summary.json").read_text())
+        if row["driver"] == "muvsim":
+            assert (summary["options"]["controller"], summary["options"]["check"]) == (row["controller"], "timed")
+        else:
+            assert summary["baseline"] == "sumo" and pd.isna(row["controller"])
+    assert df.loc[df["driver"] == "muvsim", "controller"].tolist() == ["paper", "authority"]
+    rebuilt = runs_from_dirs(tmp_path / "sweep").set_index("label")
+    ran = df.set_index("label").loc[rebuilt.index]
+    pd.testing.assert_frame_equal(rebuilt.drop(columns=["worker"]), ran.drop(columns=["worker"]))
+    monkeypatch.setattr(bridge.sweep, "_execute", broken)
+    assert run_one(specs[0], tmp_path / "here", fresh_process=False)["error"] == \
+        "RuntimeError: ran in the sweep's own process"
+    row = run_one(specs[1], tmp_path / "direct", fresh_process=True)
+    assert row["complete"] and row["controller"] == "authority" and row["worker"] is None
+    assert {k: _value(row[k]) for k in DETERMINISTIC} == {k: _value(here[specs[1].label][k]) for k in DETERMINISTIC}
+    with pytest.raises(SweepSettingsError, match="no run directory"):
+        runs_from_dirs(tmp_path / "nothing")
+    with pytest.raises(SweepSettingsError, match="no scenario or seed"):
+        spec_from_summary("x", {"options": {}})
+
+
+def test_a_fresh_run_process_that_dies_is_a_failed_row(tmp_path, monkeypatch):
+    """The process of a fresh run exiting without a row (a crash, a signal) makes a failed row naming its
+    exit code and the end of its error output."""
+    monkeypatch.setattr(bridge.sweep, "_CHILD_CODE", "import sys; sys.stderr.write('boom'); sys.exit(3)")
+    row = run_one(RunSpec(label="dead", scenario="single", seed=0, duration_s=5.0), tmp_path, fresh_process=True)
+    assert row["complete"] is False and row["error"] == "run process exited with code 3: boom"
+    assert row["label"] == "dead" and row["controller"] == "paper"
