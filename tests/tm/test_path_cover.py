@@ -16,22 +16,10 @@ from controllers.path import PathError, PathFrame
 from controllers.tolerances import GEOMETRY_TOL
 from tm.geometry import intersect_sat, rectangles
 from tm.path_cover import PathBoxes, path_box_cover, path_footprints, points_in_boxes
+from tests.polylines import random_polyline
 
 seeds = st.integers(0, 2**32 - 1)
 CAR = (5.0, 1.8)
-
-
-def random_polyline(rng, n_seg: int, min_len: float = 1.0, max_len: float = 10.0, max_turn_deg: float = 45.0,
-                    straight_p: float = 0.2) -> np.ndarray:
-    """``n_seg`` segments of random length turning by at most ``max_turn_deg`` at each vertex (as in
-    tests/controllers/test_path.py)."""
-    h = rng.uniform(-np.pi, np.pi)
-    P = [rng.uniform(-50, 50, 2)]
-    for k in range(n_seg):
-        if k:
-            h += 0.0 if rng.random() < straight_p else np.radians(rng.uniform(-max_turn_deg, max_turn_deg))
-        P.append(P[-1] + rng.uniform(min_len, max_len) * np.array([np.cos(h), np.sin(h)]))
-    return np.array(P)
 
 
 def samples(frame, s_lo, s_hi, n_lo, n_hi, k=7, rng=None):
