@@ -392,8 +392,8 @@ class McapLogger:
             if tmpl is None:
                 tmpl = self._class_text[key] = _class_templates(c, g.vclass)
             classes.append((tmpl, len(g.ids)))
-            cen_g, hd_g, _ = g.centres()
-            X.append(g.X[:, :4])
+            cen_g, hd_g, _ = g.world_centres()
+            X.append(sim.world_states(g))
             cen.append(cen_g)
             hd.append(hd_g)
             k.append(g.k)

@@ -49,7 +49,8 @@ K_ROUTE = 200  # waypoints per route
 
 
 class SyntheticGroup:
-    """The attributes and ``centres()`` of ``bridge.cosim._Group`` that the logger reads."""
+    """The attributes and ``centres()``, ``world_centres()`` of ``bridge.cosim._Group`` that the logger
+    reads (a road-frame plant: the two are the same)."""
 
     def __init__(self, rng, name, ids):
         n = len(ids)
@@ -73,6 +74,8 @@ class SyntheticGroup:
         row = self._wbuf[self.start + np.minimum(self.k + offset, self.K - 1)]
         return row[:, :2], row[:, 2], self.k + offset < self.K
 
+    world_centres = centres
+
     def advance(self, rng):
         n = len(self.ids)
         self.X[:, :2] += self.X[:, 2:4] * TS
@@ -94,7 +97,8 @@ class SyntheticFleet:
         half = V // 2
         self.groups = {"car": SyntheticGroup(self.rng, "car", [f"car{i}" for i in range(V - half)]),
                        "bus": SyntheticGroup(self.rng, "bus", [f"bus{i}" for i in range(half)])}
-        self.sim = SimpleNamespace(settings=SimpleNamespace(Ts=TS), groups=self.groups)
+        self.sim = SimpleNamespace(settings=SimpleNamespace(Ts=TS), groups=self.groups,
+                                   world_states=lambda g: g.X[:, :4])
         self.table = family_table()
         self.V = V
         gs = list(self.groups.values())

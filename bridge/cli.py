@@ -306,6 +306,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--claim-cache", choices=["on", "off"], default="on",
                    help="authority mode: on (default): current claims reused between steps where sound "
                         "(tm.reach_cache); off: fresh claims every step (the reference)")
+    r.add_argument("--frame", choices=["auto", "path", "road"], default="auto",
+                   help="the plant's frame: path (authority default): stepped along its route, turns at the "
+                        "curve speed; road (paper default): errors in the waypoint segment's frame")
     r.add_argument("--speed-limits", choices=["obey", "ignore"], default="obey",
                    help="obey (default): lanes' speed limits bound the vehicles' speed (with look-ahead); "
                         "ignore: only the class bound (the KPI speed_limit_excess_max still measures them)")

@@ -39,6 +39,7 @@ from controllers.speed_limits import SpeedSettings, free_flow_time, restart_slac
 from controllers.stmpc import STMPC
 from bridge.groups import _Group, _headings
 from bridge.pad_memo import PadMemo
+from bridge.path_fleet import FRAMES, PathFleet
 from controllers.synthesis import synthesize
 from tm.claims import Claims
 from tm.reach import ReachClaims, world_aabb
@@ -99,12 +100,27 @@ class CosimSettings:
     #: authority mode: reuse current claims between steps (:class:`tm.reach_cache.ClaimCache`);
     #: False decides on fresh claims every step (the reference the cache is checked against)
     claim_cache: bool = True
+    #: the plant's frame: ``path`` steps it in path coordinates along its route (turns at the curve
+    #: speed, routes with any angle; :mod:`bridge.path_fleet`), ``road`` in the world with errors in
+    #: the frame of the waypoint's segment (the paper's); ``auto``: ``path`` in authority mode,
+    #: ``road`` in paper mode (whose centred claims are drawn in the road frame)
+    frame: str = "auto"
+
+    @property
+    def path_frame(self) -> bool:
+        """Whether the plants run in path coordinates."""
+        return self.frame == "path" or (self.frame == "auto" and self.controller == "authority")
 
     def __post_init__(self) -> None:
         if not isinstance(self.speed, SpeedSettings):
             raise ValueError(f"CosimSettings.speed: must be a SpeedSettings, got {self.speed!r}")
         if self.controller not in CONTROLLERS:
             raise ValueError(f"CosimSettings.controller: must be one of {CONTROLLERS}, got {self.controller!r}")
+        if self.frame not in FRAMES:
+            raise ValueError(f"CosimSettings.frame: must be one of {FRAMES}, got {self.frame!r}")
+        if self.frame == "path" and self.controller != "authority":
+            raise ValueError("CosimSettings.frame: 'path' needs controller 'authority' (the paper's centred "
+                             "claims are drawn in the road frame); use frame 'road' or 'auto'")
         if not isinstance(self.claim_cache, bool):
             raise ValueError(f"CosimSettings.claim_cache: must be True or False, got {self.claim_cache!r}")
         if not isinstance(self.signals, SignalSettings):
@@ -211,7 +227,7 @@ class Cosim:
                 i = int(np.argmax(gaps))
                 raise ValueError(f"vehicle {s.id}: waypoints {i} and {i + 1} are {gaps[i]:.3f} m apart; "
                                  f"class {s.vclass!r} needs at most delta = {delta} m")
-            if model.frame == "road" and len(W) > 2:
+            if model.frame == "road" and len(W) > 2 and not settings.path_frame:
                 h = _headings(W)[1:]
                 turn = np.degrees(np.abs((np.diff(h) + np.pi) % (2 * np.pi) - np.pi))
                 if np.any(turn > model.turn_max_deg + 1e-6):
@@ -222,6 +238,11 @@ class Cosim:
         if len({s.id for s in specs}) != len(specs):
             raise ValueError("vehicle ids must be unique")
         self.authority = settings.controller == "authority"
+        #: path-frame plants (settings.frame): the routes' frames and the fleet's stack
+        self.paths = PathFleet() if settings.path_frame else None
+        if self.paths is not None:
+            for s_ in specs:  # every route must make a frame (a clear error now, not at admission)
+                self.paths.frame(s_.id, s_.waypoints)
         cs = ControllerSettings(solver=settings.solver, switching=settings.switching,
                                 mode="authority" if self.authority else "paper")
         if self.authority:
@@ -318,11 +339,12 @@ class Cosim:
             if not g.ids:
                 continue
             cen, hd, _ = g.centres()
+            wcen, whd, _ = g.world_centres()
             ids += g.ids
             fam += [c] * len(g.ids)
-            C.append(cen)
+            C.append(wcen)
             L.append(g.l)
-            H.append(hd)
+            H.append(whd)
             Ln.append(np.full(len(g.ids), g.vclass.length))
             Wd.append(np.full(len(g.ids), g.vclass.width))
             if with_requests:
@@ -345,9 +367,10 @@ class Cosim:
                 if self.settings.switching == "terminal":
                     may &= g.l == 0
                 RQ.append(may)
-                RC.append(nxt)
+                wnxt, wnh, _ = g.world_centres(1)
+                RC.append(wnxt)
                 RL.append(np.minimum(lp, g.ctl.N))
-                RH.append(nh)
+                RH.append(wnh)
         if not ids:
             return None
         cat = np.concatenate
@@ -379,7 +402,7 @@ class Cosim:
     def _signal_lines(self, ids, centre, heading, length):
         """The fleet's stop lines (:meth:`tm.signals.SignalBook.gather`) from the groups' states."""
         live = [g for g in self.groups.values() if g.ids]
-        pos = np.vstack([g.X[:, :2] for g in live])
+        pos, _ = self._poses()
         k = np.concatenate([g.k for g in live])
         speed = np.concatenate([np.linalg.norm(g.X[:, 2:4], axis=1) for g in live])
         return k, speed, self.signal_book.gather(ids, k, centre, heading, pos, 0.5 * length)
@@ -573,11 +596,12 @@ class Cosim:
                 continue
             if requests is None:
                 cen, hd, _ = g.centres()
-                parts.append((c, g.X, cen, hd, g.l, self._group_pads(g)))
+                parts.append((c, g.X, cen, hd, g.l, self._group_pads(g), self._place(g)))
             else:
                 r = np.asarray(requests.requesting[o:o + len(g.ids)], dtype=bool)
                 cen, hd, _ = g.centres(1)
-                parts.append((c, g.X[r], cen[r], hd[r], g.req_l[r], self._group_pads(g, 1)[r]))
+                parts.append((c, g.X[r], cen[r], hd[r], g.req_l[r], self._group_pads(g, 1)[r],
+                              self._place(g, 1, np.flatnonzero(r))))
             o += len(g.ids)
         return self.reach.claims(parts)
 
@@ -620,7 +644,7 @@ class Cosim:
         for c, g in self.groups.items():
             if g.ids:
                 cen, hd, _ = g.centres()
-                parts.append((c, g.ids, g.X, cen, hd, g.l, self._group_pads(g)))
+                parts.append((c, g.ids, g.X, cen, hd, g.l, self._group_pads(g), self._place(g)))
         return parts
 
     def _entry_claims(self, ready: list[VehicleSpec], cand: FleetState, with_index: bool = False):
@@ -630,11 +654,15 @@ class Cosim:
         for c in self.groups:
             idx = np.flatnonzero(cand.family == c)
             if len(idx):
-                X = self.classes[c].model.equilibrium(cand.centre[idx])
                 ctl = self.groups[c].ctl
                 pads = np.array([self._spec_pads(ready[i]) for i in idx]).reshape(len(idx), -1)
-                parts.append((c, X, cand.centre[idx], cand.heading[idx],
-                              ctl.index(X, cand.centre[idx], cand.heading[idx]), pads))
+                if self.paths is None:
+                    cen, hd, place = cand.centre[idx], cand.heading[idx], None
+                else:  # at rest on the start of its path: (0, 0), heading 0
+                    cen, hd = np.zeros((len(idx), 2)), np.zeros(len(idx))
+                    place = self.paths.entry_place([ready[i] for i in idx], cand.centre[idx], cand.heading[idx])
+                X = self.classes[c].model.equilibrium(cen)
+                parts.append((c, X, cen, hd, ctl.index(X, cen, hd), pads, place))
                 rows.append(idx)
         inv = np.empty(len(ready), dtype=np.intp)
         inv[np.concatenate(rows)] = np.arange(len(ready))
@@ -716,8 +744,10 @@ class Cosim:
         ms_ctl = (time.perf_counter() - tc) * 1e3
         if self.authority and state is not None:  # 4a. x(t+1) inside S_1(t) (tube escapes counted)
             live = [g for g in self.groups.values() if g.ids]
-            self.monitor.escapes(dec.claims, np.vstack([g.X[:, :2] for g in live]),
-                                 state.length, state.width, pad=np.vstack([self._group_pads(g) for g in live]))
+            pos, body = self._poses()
+            self.monitor.escapes(dec.claims, pos, state.length, state.width,
+                                 pad=np.vstack([self._group_pads(g) for g in live]),
+                                 body_heading=None if self.paths is None else body)
             for c, g in self.groups.items():  # positions past the stretch the body padding covers
                 if not g.ids:
                     continue
@@ -746,7 +776,9 @@ class Cosim:
         tw = time.perf_counter()
         cur = self._fleet(with_requests=False)
         if cur is not None:
-            pos = np.vstack([g.X[:, :2] for g in self.groups.values() if g.ids])
+            pos, body = self._poses()
+            if self.paths is not None:  # the bodies lie along their path segments
+                cur = replace(cur, heading=body)
             # the world's own bodies (SUMO's), if it has them; first: placing them moves the windows of
             # the claims' body padding (SumoWorld.claim_pads), so the claims below have the padding the
             # next step decides with (offered with another, they missed the offer and were shifted:
@@ -779,6 +811,29 @@ class Cosim:
         for obs in self.observers:
             obs.on_step(self, state, self.last_decision if state is not None else None, row)
         return row
+
+    def _place(self, g: _Group, offset: int = 0, rows=None):
+        """Path-frame vehicles of group ``g`` (``rows``) placed in the world for waypoints ``k + offset``
+        (:class:`tm.path_claims.PathPlace`); None for road-frame plants."""
+        if self.paths is None:
+            return None
+        return self.paths.place(list(self.groups.values()), g, offset, rows)
+
+    def _poses(self) -> tuple[np.ndarray, np.ndarray]:
+        """World centres (n, 2) and body headings (n,) of the fleet, in fleet order (road frame: the
+        plant's positions and the current waypoints' headings)."""
+        live = [g for g in self.groups.values() if g.ids]
+        if self.paths is None:
+            return np.vstack([g.X[:, :2] for g in live]), np.concatenate([g.centres()[1] for g in live])
+        groups = list(self.groups.values())
+        poses = [self.paths.pose(groups, g) for g in live]
+        return np.vstack([p[0] for p in poses]), np.concatenate([p[1] for p in poses])
+
+    def world_states(self, g: _Group) -> np.ndarray:
+        """World states ``(x, y, v_x, v_y)`` of group ``g``'s vehicles (the plant's own in the road frame)."""
+        if self.paths is None:
+            return g.X[:, :4]
+        return self.paths.state(list(self.groups.values()), g)
 
     def _first_heading(self, sp: VehicleSpec) -> float:
         h = self._heading0.get(sp.id)
@@ -816,9 +871,10 @@ class Cosim:
                              width=cur.width)
         if self.authority:  # the others' reach claims and their footprints now (condition (12))
             now = self._reach_claims() if len(cur.ids) else None
-            pos = np.vstack([g.X[:, :2] for g in self.groups.values() if g.ids]) if now is not None else None
+            pos, body = self._poses() if now is not None else (None, None)
+            body = cur.heading if self.paths is None else body
             pads = np.vstack([self._group_pads(g) for g in self.groups.values() if g.ids]) if now is not None else None
-            now = ReachClaims.concat(now, footprint_claims(pos, cur.heading, cur.length, cur.width, pad=pads)) \
+            now = ReachClaims.concat(now, footprint_claims(pos, body, cur.length, cur.width, pad=pads)) \
                 if now is not None else footprint_claims(np.zeros((0, 2)), [], [], [])
             entry = self._entry_claims(ready, cand, with_index=True)
             ok = admit_reach(now, entry[0], self.settings.tm.check)
@@ -840,9 +896,14 @@ class Cosim:
                 continue
             g = self.groups[sp.vclass]
             W = np.asarray(sp.waypoints, dtype=float)
-            x0 = g.vclass.model.equilibrium(W[0])
             H = _headings(W)
-            g.add(sp.id, W, H, x0, int(g.ctl.index(x0[None], W[:1], H[:1])[0]), self._route_speeds(sp))
+            rs = self._route_speeds(sp)
+            world = None
+            if self.paths is not None:  # the controller's route: (S_k, 0), heading 0
+                world = (W, H)
+                W, H = self.paths.waypoints(sp.id, W, rs.arc), np.zeros(len(W))
+            x0 = g.vclass.model.equilibrium(W[0])
+            g.add(sp.id, W, H, x0, int(g.ctl.index(x0[None], W[:1], H[:1])[0]), rs, world=world)
             self.records[sp.id].admitted_s = t_s
             if sp.stop_lines is not None:
                 reach = self.junctions.classes[sp.vclass].hold + 0.5 * g.vclass.length

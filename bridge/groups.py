@@ -12,11 +12,12 @@ from controllers.stmpc import STMPC
 __all__ = ["_Group", "_headings"]
 
 
-#: Columns of a group's waypoint buffer: x, y, heading, then the speed tables of
-#: :mod:`controllers.speed_limits` (arc shifted per route so that it increases over the buffer,
-#: gap bound, look-ahead speed, lane limit).
-_X, _Y, _H, _ARC, _BOUND, _ENV, _LANE = range(7)
-_COLS = 7
+#: Columns of a group's waypoint buffer: x, y, heading (the controller's frame), then the speed
+#: tables of :mod:`controllers.speed_limits` (arc shifted per route so that it increases over the
+#: buffer, gap bound, look-ahead speed, lane limit), then x, y, heading in the world (the same as
+#: the first three for a road-frame plant; a path-frame plant's waypoints are ``(S_k, 0)``, heading 0).
+_X, _Y, _H, _ARC, _BOUND, _ENV, _LANE, _WX, _WY, _WH = range(10)
+_COLS = 10
 #: Gap between the shifted arcs of two routes in a buffer (m): more than any look-ahead.
 _ROUTE_GAP_M = 1.0e4
 
@@ -42,7 +43,7 @@ class _Group:
         self.X = np.zeros((0, n))
         self.k = np.zeros(0, dtype=np.intp)
         self.l = np.zeros(0, dtype=np.intp)
-        self.W: list[np.ndarray] = []
+        self.W: list[np.ndarray] = []  # world waypoints and headings of each route
         self.H: list[np.ndarray] = []
         # every route's waypoints and headings in one buffer, so that the current (or next)
         # waypoints of all vehicles are one gather: row start[i] + k[i] of vehicle i
@@ -59,8 +60,12 @@ class _Group:
         self.excess = np.zeros(0)                # largest speed over the front's lane limit so far (m/s)
         self.binds = np.zeros(0, dtype=bool)     # whether some speed bound of the route lies below v_max
 
-    def add(self, vid, W, H, x0, l0, speeds: RouteSpeeds | None = None):
+    def add(self, vid, W, H, x0, l0, speeds: RouteSpeeds | None = None, world=None):
+        """Add a vehicle: waypoints ``W`` (K, 2) and headings ``H`` (K,) in the controller's frame,
+        state ``x0``, index ``l0``; ``world``: ``(W, H)`` in the world when the controller's frame
+        is not (a path-frame plant), else the same."""
         K = len(W)
+        Ww, Hw = (W, H) if world is None else world
         live = int(self.K.sum())
         if self._used + K > len(self._wbuf):
             if self._used > 2 * live + 4096:  # mostly removed routes: compact
@@ -76,6 +81,8 @@ class _Group:
         rows = slice(self._used, self._used + K)
         self._wbuf[rows, :2] = W
         self._wbuf[rows, _H] = H
+        self._wbuf[rows, _WX:_WY + 1] = Ww
+        self._wbuf[rows, _WH] = Hw
         if speeds is None:  # no limits: the class bound everywhere
             arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(W, axis=0), axis=1))])
             self._wbuf[rows, _BOUND] = self._wbuf[rows, _ENV] = self._wbuf[rows, _LANE] = self.v_max
@@ -89,8 +96,8 @@ class _Group:
         self.X = np.vstack([self.X, x0[None]])
         self.k = np.append(self.k, 0)
         self.l = np.append(self.l, l0)
-        self.W.append(W)
-        self.H.append(H)
+        self.W.append(np.asarray(Ww, dtype=float))
+        self.H.append(np.asarray(Hw, dtype=float))
         self.start = np.append(self.start, self._used)
         self.K = np.append(self.K, K)
         self._used += K
@@ -125,6 +132,13 @@ class _Group:
             return np.zeros((0, 2)), np.zeros(0), np.zeros(0, dtype=bool)
         row = self._wbuf[self.start + np.minimum(self.k + offset, self.K - 1)]
         return row[:, :2], row[:, _H], self.k + offset < self.K
+
+    def world_centres(self, offset=0):
+        """:meth:`centres` in the world (waypoints, headings of the segments arriving there)."""
+        if not self.ids:
+            return np.zeros((0, 2)), np.zeros(0), np.zeros(0, dtype=bool)
+        row = self._wbuf[self.start + np.minimum(self.k + offset, self.K - 1)]
+        return row[:, _WX:_WY + 1], row[:, _WH], self.k + offset < self.K
 
     # ------------------------------------------------------------------ speed bounds
     def _along(self, X=None):

@@ -129,7 +129,7 @@ def run_multi(name: str, out: Path, opts, world=None, specs=None) -> dict:
             raise ScenarioRunError(f"unknown scenario {name!r}; built-in scenarios: {', '.join(SCENARIOS)}")
     out.mkdir(parents=True, exist_ok=True)
     options = {k: getattr(opts, k) for k in ("vclass", "tm", "check", "switching", "disturbance", "solver",
-                                             "duration", "vehicles", "controller", "claim_cache")
+                                             "duration", "vehicles", "controller", "claim_cache", "frame")
                if hasattr(opts, k)}
     summary = {"scenario": name, "seed": opts.seed, "options": options, "complete": False}
     _write_summary(out, summary)
@@ -142,7 +142,8 @@ def run_multi(name: str, out: Path, opts, world=None, specs=None) -> dict:
                                  seed=opts.seed, duration_s=opts.duration,
                                  controller=getattr(opts, "controller", "paper"),
                                  speed=SpeedSettings.from_options(opts),
-                                 claim_cache=(getattr(opts, "claim_cache", None) or "on") == "on")
+                                 claim_cache=(getattr(opts, "claim_cache", None) or "on") == "on",
+                                 frame=getattr(opts, "frame", None) or "auto")
         observers = [HaltCounter()] + observers_for(out, getattr(opts, "log", None) or "none",
                                                     {"scenario": name, "seed": opts.seed, **options})
         observers.append(StreamingOutputs(out, dict(summary)))  # last: the row is complete by then

@@ -429,6 +429,7 @@ def run_sumo(target: str, out: Path, opts, observers_extra: list | None = None) 
                                     solver=opts.solver, duration_s=opts.duration, signals=signals.mode,
                                     controller=getattr(opts, "controller", "paper"),
                                     claim_cache=getattr(opts, "claim_cache", None) or "on",
+                                    frame=getattr(opts, "frame", None) or "auto",
                                     speed_limits=getattr(opts, "speed_limits", None) or "obey",
                                     lat_accel=SpeedSettings.from_options(opts).lat_accel
                                     if SpeedSettings.from_options(opts).curves else 0.0))
@@ -499,7 +500,8 @@ def run_sumo(target: str, out: Path, opts, observers_extra: list | None = None) 
                                  disturbance=disturbance, solver=opts.solver, seed=seed, duration_s=duration,
                                  signals=signals, controller=getattr(opts, "controller", "paper"),
                                  speed=SpeedSettings.from_options(opts),
-                                 claim_cache=summary["options"]["claim_cache"] == "on")
+                                 claim_cache=summary["options"]["claim_cache"] == "on",
+                                 frame=summary["options"]["frame"])
         observers = [HaltCounter()] + observers_for(out, getattr(opts, "log", None) or "none",
                                                     {"scenario": str(target), "seed": seed, **summary["options"]})
         observers += list(observers_extra or [])

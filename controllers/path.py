@@ -52,7 +52,7 @@ import numpy as np
 
 from controllers.tolerances import PATH_COLLINEAR_TOL_M, PATH_DUP_TOL_M
 
-__all__ = ["PathFrame", "PathError", "DEFAULT_PROJECTION_WINDOW_M"]
+__all__ = ["PathFrame", "PathStack", "PathError", "DEFAULT_PROJECTION_WINDOW_M"]
 
 #: Arc window (m) either side of ``s_hint`` whose segments :meth:`PathFrame.to_path` considers:
 #: a vehicle moves at most ~1.4 m a step (13.89 m/s, 0.1 s), so a hint one step old is well inside.
@@ -246,3 +246,95 @@ class PathFrame:
         seg, tb, fb, db = cand[r, best], t[r, best], foot[r, best], dist[r, best]
         side = self.tangent[seg, 0] * fb[:, 1] - self.tangent[seg, 1] * fb[:, 0]
         return self.arc[seg] + tb, np.where(side < 0.0, -db, db)
+
+
+class PathStack:
+    """Several path frames as one set of arrays: the maps of many vehicles, each on its own route,
+    vectorised over the vehicles (a frame is picked per point by its index ``fid``).
+
+    The frames' segments are concatenated; frame ``i`` owns segments ``first[i] .. last[i]`` and its
+    arc is shifted by ``offset[i]`` so that the segments' starts increase over the whole stack (one
+    ``searchsorted`` finds a segment); lookups are clipped to the frame's own segments, so each
+    frame keeps its first and last segments extended beyond its route's ends, as :class:`PathFrame`.
+
+    Parameters
+    ----------
+    frames : sequence of PathFrame
+    """
+
+    __slots__ = ("n_frames", "vertices", "heading", "tangent", "normal", "start", "end", "first", "last",
+                 "offset", "_start_g", "_end_g")
+
+    #: Gap (m) between consecutive frames' shifted arcs (keeps the shifted starts strictly increasing).
+    GAP_M = 1.0
+
+    def __init__(self, frames):
+        frames = list(frames)
+        if not all(isinstance(f, PathFrame) for f in frames):
+            raise PathError("PathStack: every frame must be a PathFrame")
+        M = np.array([f.n_segments for f in frames], dtype=np.intp)
+        L = np.array([f.length for f in frames], dtype=float)
+        first = np.concatenate([[0], np.cumsum(M)[:-1]]).astype(np.intp) if len(frames) else np.zeros(0, np.intp)
+        offset = np.concatenate([[0.0], np.cumsum(L + self.GAP_M)[:-1]]) if len(frames) else np.zeros(0)
+        cat = (lambda xs, shape: np.concatenate(xs) if xs else np.zeros(shape))  # noqa: E731
+        arrays = dict(
+            n_frames=len(frames),
+            vertices=cat([f.vertices[:-1] for f in frames], (0, 2)),
+            heading=cat([f.heading for f in frames], (0,)),
+            tangent=cat([f.tangent for f in frames], (0, 2)),
+            normal=cat([f.normal for f in frames], (0, 2)),
+            start=cat([f.arc[:-1] for f in frames], (0,)),
+            end=cat([f.arc[1:] for f in frames], (0,)),
+            first=first, last=first + M - 1, offset=offset)
+        rep = np.repeat(offset, M)
+        arrays["_start_g"] = arrays["start"] + rep
+        arrays["_end_g"] = arrays["end"] + rep
+        for k, a in arrays.items():
+            if isinstance(a, np.ndarray):
+                a = np.ascontiguousarray(a)
+                a.flags.writeable = False
+            object.__setattr__(self, k, a)
+
+    def __setattr__(self, name, value):
+        raise AttributeError("PathStack is immutable")
+
+    def __len__(self) -> int:
+        return self.n_frames
+
+    def _fid(self, fid, shape) -> np.ndarray:
+        f = np.broadcast_to(np.asarray(fid, dtype=np.intp), shape)
+        if f.size and (f.min() < 0 or f.max() >= self.n_frames):
+            raise PathError(f"PathStack: frame index out of 0 .. {self.n_frames - 1}")
+        return f
+
+    def segment(self, fid, s) -> np.ndarray:
+        """Global segment index of ``s`` on frame ``fid`` (right-continuous at vertices, the
+        frame's ends extended; :meth:`PathFrame.segment`); broadcast together."""
+        s = np.asarray(s, dtype=float)
+        f = self._fid(fid, np.broadcast_shapes(np.shape(fid), s.shape))
+        j = np.searchsorted(self._start_g, s + self.offset[f], side="right") - 1
+        return np.clip(j, self.first[f], self.last[f])
+
+    def first_meeting(self, fid, s_lo) -> np.ndarray:
+        """The first segment of frame ``fid`` whose closed arc range reaches ``s_lo`` (its end
+        ``>= s_lo``; the last segment beyond the route's end)."""
+        f = np.asarray(fid, dtype=np.intp)
+        j = np.searchsorted(self._end_g, np.asarray(s_lo, dtype=float) + self.offset[f], side="left")
+        return np.clip(j, self.first[f], self.last[f])
+
+    def to_world(self, fid, s, n) -> tuple[np.ndarray, np.ndarray]:
+        """World centres and body headings of path coordinates ``(s, n)`` on frames ``fid``
+        (:meth:`PathFrame.to_world`, vectorised over frames; broadcast together)."""
+        s, n = np.broadcast_arrays(np.asarray(s, dtype=float), np.asarray(n, dtype=float))
+        if not (np.isfinite(s).all() and np.isfinite(n).all()):
+            raise PathError("to_world: s and n must be finite")
+        i = self.segment(fid, s)
+        a = s - self.start[i]
+        xy = self.vertices[i] + a[..., None] * self.tangent[i] + n[..., None] * self.normal[i]
+        return xy, self.heading[i]
+
+    def velocity(self, fid, s, v_s, v_n) -> np.ndarray:
+        """World velocities (…, 2) of path velocities ``(v_s, v_n)`` at ``s`` on frames ``fid``."""
+        i = self.segment(fid, s)
+        v_s, v_n = np.asarray(v_s, dtype=float), np.asarray(v_n, dtype=float)
+        return v_s[..., None] * self.tangent[i] + v_n[..., None] * self.normal[i]

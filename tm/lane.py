@@ -28,6 +28,8 @@ from controllers.settings import ControllerSettings, SynthesisSettings
 from controllers.stmpc import STMPC
 from controllers.synthesis import synthesize
 from tm.settings import TMSettings
+from tm.path_claims import bare_model
+from tm.reach_book import ReachBook
 from tm.manager import FleetState, TrafficManager
 from tm.reach import (ReachClaims, ReachModel, candidate_pairs, claims_conflict, pairwise_conflicts, reach_claims,
                       world_aabb)
@@ -399,6 +401,9 @@ class _LaneBook:
 
     def __init__(self, models: dict):
         self.models = dict(models)
+        self.bare = {c: bare_model(m) for c, m in self.models.items()}
+
+    claims_of = ReachBook.claims_of
 
     @property
     def K(self) -> int:

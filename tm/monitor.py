@@ -99,11 +99,12 @@ class Monitor:
         self.tube_escapes = 0
         self.min_separation = np.inf
 
-    def escapes(self, claims: ReachClaims, position, length, width, pad=None) -> int:
+    def escapes(self, claims: ReachClaims, position, length, width, pad=None, body_heading=None) -> int:
         """Count (and return) the vehicles outside the position part of their ``S_1`` (slot 1 of
         ``claims``: the claims in force after the last decision, rows as ``position``; ``pad``:
-        the footprint padding they were built with)."""
-        n = int(tube_escapes(claims, position, length, width, pad=pad).sum())
+        the footprint padding they were built with; ``body_heading``: the bodies' headings where
+        they differ from the claims' frames, :func:`tm.reach_book.tube_escapes`)."""
+        n = int(tube_escapes(claims, position, length, width, pad=pad, body_heading=body_heading).sum())
         self.tube_escapes += n
         return n
 

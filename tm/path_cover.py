@@ -38,10 +38,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from controllers.path import PathError, PathFrame
+from controllers.path import PathError, PathFrame, PathStack
 from tm.geometry import rectangles
 
-__all__ = ["PathBoxes", "path_box_cover", "path_footprints", "points_in_boxes"]
+__all__ = ["PathBoxes", "path_box_cover", "stack_box_cover", "cover_bounds", "path_footprints", "points_in_boxes"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -103,30 +103,77 @@ def path_box_cover(frame: PathFrame, s_lo, s_hi, n_lo, n_hi, length, width) -> P
         A value that is not finite, or a negative length or width.
     """
     shape = np.broadcast_shapes(*(np.shape(a) for a in (s_lo, s_hi, n_lo, n_hi, length, width)))
-    sl, sh = _flat("s_lo", s_lo, shape), _flat("s_hi", s_hi, shape)
-    nl, nh = _flat("n_lo", n_lo, shape), _flat("n_hi", n_hi, shape)
     L, W = _flat("length", length, shape), _flat("width", width, shape)
     if (L < 0).any() or (W < 0).any():
         raise PathError("path_box_cover: length and width must be >= 0")
-    m, M = sl.size, frame.n_segments
-    inner = frame.arc[1:-1]
+    boxes = stack_box_cover(PathStack([frame]), np.zeros(L.size, dtype=np.intp), _flat("s_lo", s_lo, shape),
+                            _flat("s_hi", s_hi, shape), _flat("n_lo", n_lo, shape), _flat("n_hi", n_hi, shape),
+                            0.5 * L, 0.5 * L, 0.5 * W, 0.5 * W)
+    return PathBoxes(boxes.owner, boxes.segment, boxes.centre, boxes.heading, boxes.half, boxes.start,
+                     boxes.count, shape)
+
+
+def stack_box_cover(stack: PathStack, fid, s_lo, s_hi, n_lo, n_hi, back, front, right, left) -> PathBoxes:
+    """:func:`path_box_cover` on the frames of a :class:`~controllers.path.PathStack`, interval ``q``
+    on frame ``fid[q]``, with a body that reaches ``back``/``front`` along and ``right``/``left``
+    across its own axes from its centre (a footprint plus one-sided padding); 1-D arrays of one
+    length (scalars broadcast).  Box ``i`` in segment ``i``'s frame: along ``[a_i - back, b_i +
+    front]``, across ``[n_lo - right, n_hi + left]`` (module notes).  Returns :class:`PathBoxes` with
+    ``segment`` the stack's global segment index and ``shape = (m,)``."""
+    sl = np.atleast_1d(np.asarray(s_lo, dtype=float))
+    m = sl.size
+    fid, sh, nl, nh, bk, fr, rt, lf = (np.broadcast_to(np.asarray(a, dtype=np.intp if k == 0 else float), (m,))
+                                       for k, a in enumerate((fid, s_hi, n_lo, n_hi, back, front, right, left)))
+    for name, a in (("s_lo", sl), ("s_hi", sh), ("n_lo", nl), ("n_hi", nh), ("extent", np.concatenate([bk, fr, rt, lf]))):
+        if not np.isfinite(a).all():
+            raise PathError(f"stack_box_cover: {name} must be finite")
     ok = (sl <= sh) & (nl <= nh)
-    i0 = np.searchsorted(inner, sl, side="left")    # first segment with S_{i+1} >= s_lo
-    i1 = np.searchsorted(inner, sh, side="right")   # last segment with S_i <= s_hi
+    i0 = stack.first_meeting(fid, np.where(ok, sl, 0.0))   # first segment with S_{i+1} >= s_lo
+    i1 = stack.segment(fid, np.where(ok, sh, 0.0))         # last segment with S_i <= s_hi
     count = np.where(ok, i1 - i0 + 1, 0)
     start = np.concatenate([[0], np.cumsum(count)[:-1]]).astype(np.intp) if m else np.zeros(0, np.intp)
     owner = np.repeat(np.arange(m), count)
     seg = i0[owner] + (np.arange(len(owner)) - start[owner])
-    S0 = np.where(seg == 0, -np.inf, frame.arc[seg])
-    S1 = np.where(seg == M - 1, np.inf, frame.arc[seg + 1])
-    a = np.maximum(sl[owner], S0) - frame.arc[seg]
-    b = np.minimum(sh[owner], S1) - frame.arc[seg]
-    hx = 0.5 * (b - a) + 0.5 * L[owner]
-    hy = 0.5 * (nh[owner] - nl[owner]) + 0.5 * W[owner]
-    mx, my = 0.5 * (a + b), 0.5 * (nl[owner] + nh[owner])
-    centre = frame.vertices[seg] + mx[:, None] * frame.tangent[seg] + my[:, None] * frame.normal[seg]
-    return PathBoxes(owner=owner, segment=seg, centre=centre, heading=frame.heading[seg].copy(),
-                     half=np.column_stack([hx, hy]), start=start, count=count, shape=shape)
+    f = fid[owner]
+    S0 = np.where(seg == stack.first[f], -np.inf, stack.start[seg])
+    S1 = np.where(seg == stack.last[f], np.inf, stack.end[seg])
+    a = np.maximum(sl[owner], S0) - stack.start[seg]
+    b = np.minimum(sh[owner], S1) - stack.start[seg]
+    lo_x, hi_x = a - bk[owner], b + fr[owner]
+    lo_y, hi_y = nl[owner] - rt[owner], nh[owner] + lf[owner]
+    mx, my = 0.5 * (lo_x + hi_x), 0.5 * (lo_y + hi_y)
+    centre = stack.vertices[seg] + mx[:, None] * stack.tangent[seg] + my[:, None] * stack.normal[seg]
+    return PathBoxes(owner=owner, segment=seg, centre=centre, heading=stack.heading[seg].copy(),
+                     half=np.column_stack([0.5 * (hi_x - lo_x), 0.5 * (hi_y - lo_y)]), start=start, count=count,
+                     shape=(m,))
+
+
+def cover_bounds(boxes: PathBoxes, centre, heading) -> tuple[np.ndarray, np.ndarray]:
+    """The bounding box, in the frame ``centre + R(heading)`` of each interval (``centre`` (m, 2),
+    ``heading`` (m,), one per interval of ``boxes``), of that interval's boxes: ``lo, hi`` (m, 2);
+    intervals without a box inverted (``+inf, -inf``).  Sound: it holds every box of the interval."""
+    m = int(np.prod(boxes.shape)) if boxes.shape else 1
+    lo = np.full((m, 2), np.inf)
+    hi = np.full((m, 2), -np.inf)
+    if not len(boxes):
+        return lo, hi
+    o = boxes.owner
+    h = np.asarray(heading, dtype=float)[o]
+    c, s = np.cos(h), np.sin(h)
+    d = boxes.centre - np.asarray(centre, dtype=float)[o]
+    u = c * d[:, 0] + s * d[:, 1]
+    v = -s * d[:, 0] + c * d[:, 1]
+    dh = boxes.heading - h
+    cc, ss = np.abs(np.cos(dh)), np.abs(np.sin(dh))
+    eu = cc * boxes.half[:, 0] + ss * boxes.half[:, 1]
+    ev = ss * boxes.half[:, 0] + cc * boxes.half[:, 1]
+    has = np.flatnonzero(boxes.count > 0)
+    at = boxes.start[has]
+    lo[has, 0] = np.minimum.reduceat(u - eu, at)
+    lo[has, 1] = np.minimum.reduceat(v - ev, at)
+    hi[has, 0] = np.maximum.reduceat(u + eu, at)
+    hi[has, 1] = np.maximum.reduceat(v + ev, at)
+    return lo, hi
 
 
 def path_footprints(frame: PathFrame, s, n, length, width) -> np.ndarray:

@@ -15,6 +15,7 @@ import numpy as np
 from controllers.authority import build_tables
 from controllers.synthesis import SetFamily, rotate_pairs
 from controllers.tolerances import GEOMETRY_TOL
+from tm.path_claims import PathPlace, bare_model, path_reach_claims
 from tm.reach import ReachClaims, ReachModel, candidate_pairs, claims_conflict, reach_claims, split_pad, world_aabb
 
 __all__ = ["ReachBook", "tube_escapes", "footprint_claims", "admit_reach"]
@@ -36,18 +37,31 @@ class ReachBook:
             raise ValueError(f"ReachBook: class(es) {missing} have no movement-authority family "
                              "(synthesise with SynthesisSettings.authority_decel)")
         self.models = {c: ReachModel.build(f, build_tables(f), *footprints[c]) for c, f in families.items()}
+        #: the models without footprint (path-frame vehicles: the footprint is laid along the path)
+        self.bare = {c: bare_model(m) for c, m in self.models.items()}
 
     @property
     def K(self) -> int:
         """The largest number of claim slots over the classes."""
         return max(m.K for m in self.models.values())
 
+    def claims_of(self, cls: str, X, centre, heading, index, pad=None, place: PathPlace | None = None) -> ReachClaims:
+        """Claims of vehicles of class ``cls`` (:func:`tm.reach.reach_claims`); with ``place``, of
+        vehicles driven in path coordinates (``X``, ``centre``, ``heading`` in their frames:
+        :func:`tm.path_claims.path_reach_claims`, drawn in the world frames of ``place``)."""
+        m = self.models[cls]
+        index = np.minimum(index, m.N)
+        if place is None:
+            return reach_claims(m, X, centre, heading, index, body_pad=pad)
+        return path_reach_claims(m, self.bare[cls], X, centre, index, place, body_pad=pad)
+
     def claims(self, parts: Sequence[tuple]) -> ReachClaims:
-        """Claims of groups ``(class, X (n, 4), centre (n, 2), heading (n,), index (n,)[, pad (n, 2)])``,
-        concatenated (shorter horizons padded with their last slot); an empty claim set when every
-        group is empty.  ``pad``: the footprint's extra half extents (``reach_claims``' ``body_pad``)."""
-        out = [reach_claims(self.models[p[0]], p[1], p[2], p[3], np.minimum(p[4], self.models[p[0]].N),
-                            body_pad=p[5] if len(p) > 5 else None)
+        """Claims of groups ``(class, X (n, 4), centre (n, 2), heading (n,), index (n,)[, pad (n, 2)[,
+        place]])``, concatenated (shorter horizons padded with their last slot); an empty claim set
+        when every group is empty.  ``pad``: the footprint's extra half extents (``reach_claims``'
+        ``body_pad``); ``place``: a :class:`~tm.path_claims.PathPlace` for path-frame vehicles."""
+        out = [self.claims_of(p[0], p[1], p[2], p[3], p[4], p[5] if len(p) > 5 else None,
+                              p[6] if len(p) > 6 else None)
                for p in parts if len(p[1])]
         if not out:
             K = self.K
@@ -67,20 +81,32 @@ def footprint_claims(position, heading, length, width, K: int = 1, pad=None) -> 
 
 
 def tube_escapes(claims: ReachClaims, position, length, width, tol: float = GEOMETRY_TOL,
-                 pad=None) -> np.ndarray:
+                 pad=None, body_heading=None) -> np.ndarray:
     """Which vehicles' positions ``x(t+1)`` lie outside the position part of their claim ``S_1(t)``
     (the box minus the footprint, ``tol`` given away): a tube escape, never expected.
 
     ``claims``: the claims in force after the decision of step ``t`` (the box of slot 1 was built
     with ``body_offset = 0``: half footprint ``(length, width) / 2`` in the segment frame, plus the
-    ``body_pad`` the claims were built with, ``pad`` (n, 2) or (n, 4): :func:`tm.reach.split_pad`)."""
+    ``body_pad`` the claims were built with, ``pad`` (n, 2) or (n, 4): :func:`tm.reach.split_pad`).
+
+    ``body_heading`` (n,): the bodies' headings where they need not be the claims' (path-frame
+    vehicles, :mod:`tm.path_claims`): the padded rectangle is then turned by the difference and its
+    bounding box in the claim's frame is what the box must hold."""
     position = np.asarray(position, dtype=float).reshape(-1, 2)
     if len(position) != len(claims):
         raise ValueError(f"tube_escapes: {len(claims)} claims for {len(position)} positions")
     e = rotate_pairs(position - claims.centre, -claims.heading)
     half = 0.5 * np.column_stack([np.asarray(length, dtype=float), np.asarray(width, dtype=float)])
-    plo, phi = split_pad(pad, len(position)) if pad is not None else (0.0, 0.0)
-    lo, hi = claims.lo[:, 0] + half + plo, claims.hi[:, 0] - half - phi
+    half = np.broadcast_to(half, (len(position), 2))
+    plo, phi = split_pad(pad, len(position)) if pad is not None else (np.zeros((len(position), 2)),) * 2
+    blo, bhi = half + plo, half + phi  # the body's reach behind/right and ahead/left of its centre
+    if body_heading is not None:
+        d = np.asarray(body_heading, dtype=float) - claims.heading
+        corners = np.stack([np.column_stack([-blo[:, 0], -blo[:, 1]]), np.column_stack([bhi[:, 0], -blo[:, 1]]),
+                            np.column_stack([bhi[:, 0], bhi[:, 1]]), np.column_stack([-blo[:, 0], bhi[:, 1]])], axis=1)
+        rc = rotate_pairs(corners.reshape(-1, 2), np.repeat(d, 4)).reshape(-1, 4, 2)
+        blo, bhi = -rc.min(axis=1), rc.max(axis=1)
+    lo, hi = claims.lo[:, 0] + blo, claims.hi[:, 0] - bhi
     return np.any((e < lo - tol) | (e > hi + tol), axis=1)
 
 

@@ -35,7 +35,8 @@ import numpy as np
 
 from controllers.synthesis import rotate_pairs
 from controllers.tolerances import GEOMETRY_TOL
-from tm.reach import ReachClaims, pad_slots, reach_claims
+from tm.path_claims import PathPlace
+from tm.reach import ReachClaims, pad_slots
 from tm.reach_book import ReachBook
 
 __all__ = ["ClaimCache", "CacheStats", "REASONS"]
@@ -139,6 +140,17 @@ class ClaimCache:
                                 for p in parts])
         return cls, X, centre, heading, index, pad
 
+    @staticmethod
+    def _places(parts) -> PathPlace | None:
+        """The parts' path places (8th item, :class:`tm.path_claims.PathPlace`), concatenated, or
+        None; path-frame vehicles' claims are built in their frames and drawn in the places'."""
+        with_place = [len(p) > 7 and p[7] is not None for p in parts]
+        if not any(with_place):
+            return None
+        if not all(with_place):
+            raise ValueError("ClaimCache: either every part has a path place (8th item) or none has")
+        return PathPlace.concat(*(p[7] for p in parts))
+
     def _offered(self, t, ids, cls, X, centre, heading, index, pad) -> ReachClaims | None:
         o, self._offer = self._offer, None
         if o is None or o.t != t or o.ids != ids:
@@ -157,10 +169,12 @@ class ClaimCache:
         ----------
         t : int
             The step (consecutive integers; reuse needs the previous step committed).
-        parts : sequence of (class, ids, X (n, 4), centre (n, 2), heading (n,), index (n,)[, pad (n, ...)])
+        parts : sequence of (class, ids, X (n, 4), centre (n, 2), heading (n,), index (n,)[, pad (n, ...)[, place]])
             As :meth:`tm.reach_book.ReachBook.claims`, with the vehicles' ids; ``pad``: the
             footprint padding (``body_pad`` of :func:`~tm.reach.reach_claims`, passed on as it is),
-            in every part or in none.
+            in every part or in none; ``place``: path-frame vehicles' :class:`~tm.path_claims.PathPlace`
+            (``X``, ``centre``, ``heading`` are then path coordinates: the reach test and the waypoint
+            check work on them; the claims are drawn in the places' world frames).
 
         Returns
         -------
@@ -183,6 +197,7 @@ class ClaimCache:
             self.last_reused = np.zeros(0, dtype=bool)
             return ReachClaims(np.zeros((0, 2)), np.zeros(0), np.zeros((0, K, 2)), np.zeros((0, K, 2)))
         cls, X, centre, heading, index, pad = self._stack(parts)
+        place = self._places(parts)
         n = len(ids)
         given = self._offered(t, ids, cls, X, centre, heading, index, pad)
         if given is not None:
@@ -220,8 +235,9 @@ class ClaimCache:
         f = np.flatnonzero(~reuse)
         for c in dict.fromkeys(cls[f].tolist()):
             g = f[cls[f] == c]
-            fresh = pad_slots(reach_claims(self.book.models[c], X[g], centre[g], heading[g], index[g],
-                                           body_pad=None if pad is None else pad[g]), self.K)
+            fresh = pad_slots(self.book.claims_of(c, X[g], centre[g], heading[g], index[g],
+                                                  None if pad is None else pad[g],
+                                                  None if place is None else place.take(g)), self.K)
             lo[g], hi[g] = fresh.lo, fresh.hi
             fb = fresh.slot_boxes
             for q in range(4):  # per plane: a scatter along the middle axis is slow
@@ -229,7 +245,8 @@ class ClaimCache:
         self.last_reused = reuse
         self.stats.reused += len(r)
         self.stats.fresh += len(f)
-        out = ReachClaims(centre, heading, lo, hi)._with_boxes(boxes)
+        out = (ReachClaims(centre, heading, lo, hi) if place is None
+               else ReachClaims(place.centre, place.heading, lo, hi))._with_boxes(boxes)
         if pad is not None and len(r):  # a shifted row keeps the (larger) pad it was built with
             pad = pad.copy()
             pad[r] = self._last.pad[j[r]]

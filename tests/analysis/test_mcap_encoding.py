@@ -128,6 +128,8 @@ class FakeGroup:
         hd = np.array([h[min(k, len(h) - 1)] for h, k in zip(self.heading, self.k)], dtype=float)
         return cen, hd, self.k < np.array([len(w) for w in self.W])
 
+    world_centres = centres  # a road-frame plant: its frame is the world's
+
 
 class FakeClaims:
     def __init__(self, polys):
@@ -140,7 +142,7 @@ class FakeClaims:
 def fake_step(rng, groups, t_s, n_edges=3, K=6, decision=True, polys=None):
     """(sim, state, decision, row) for ``groups`` {class name: FakeGroup}; claim polygons
     ``polys`` (n, K, 2), or random ones."""
-    sim = SimpleNamespace(settings=SimpleNamespace(Ts=0.1), groups=groups)
+    sim = SimpleNamespace(settings=SimpleNamespace(Ts=0.1), groups=groups, world_states=lambda g: g.X[:, :4])
     row = {"t_s": t_s, "tm_ms": float(rng.uniform(0, 5))}
     if not decision:
         return sim, None, None, row

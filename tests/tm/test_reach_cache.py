@@ -5,6 +5,9 @@ the closed-form reach ``A^k x ± r_k`` round differently by ~1e-13 m (as in test
 """
 
 import numpy as np
+
+from tm.path_claims import bare_model
+from tm.reach_book import ReachBook
 import pytest
 from hypothesis import assume, given, settings as hsettings, strategies as st
 
@@ -33,7 +36,10 @@ class _Book:
 
     def __init__(self, lcs):
         self.models = {c: lc.reach for c, lc in lcs.items()}
+        self.bare = {c: bare_model(m) for c, m in self.models.items()}
         self.K = max(m.K for m in self.models.values())
+
+    claims_of = ReachBook.claims_of  # fresh claims, as the real book builds them
 
     def fresh(self, parts) -> ReachClaims:
         return ReachClaims.concat(*[pad_slots(reach_claims(self.models[c], X, C, H, np.minimum(L, self.models[c].N)),

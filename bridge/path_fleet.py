@@ -1,0 +1,104 @@
+"""Path-frame plants in the co-simulation loop: each vehicle's route as a path frame, the fleet's
+frames as one stack, and the maps between the plant's path coordinates and the world.
+
+A path-frame vehicle (:class:`bridge.cosim.CosimSettings` ``frame``) is stepped in ``(s, n, v_s,
+v_n)`` along its route polyline (:mod:`controllers.path`); its controller sees waypoints ``(S_k,
+0)`` with heading 0, so every route, whatever its turns, is a straight road to it.  The world
+pose is ``to_world(s, n)`` with the heading of the path segment ``s`` lies on; the claims are
+drawn in the world by :mod:`tm.path_claims`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from controllers.path import PathError, PathFrame, PathStack
+from tm.path_claims import PathPlace
+
+__all__ = ["PathFleet", "FRAMES"]
+
+#: Valid values of :attr:`bridge.cosim.CosimSettings.frame`.
+FRAMES = ("auto", "road", "path")
+
+
+class PathFleet:
+    """The path frames of a run's vehicles and the stack of the vehicles in the network."""
+
+    def __init__(self):
+        self._frames: dict[str, PathFrame] = {}
+        self._S: dict[str, np.ndarray] = {}
+        self._key: tuple = ()
+        self._stack = PathStack([])
+        self._offset: dict[int, int] = {}
+
+    def frame(self, vid: str, W) -> PathFrame:
+        """The path frame of vehicle ``vid``'s route ``W`` (built once)."""
+        f = self._frames.get(vid)
+        if f is None:
+            try:
+                f = self._frames[vid] = PathFrame(W)
+            except PathError as exc:
+                raise ValueError(f"vehicle {vid}: its route cannot be driven in the path frame: {exc}") from None
+        return f
+
+    def waypoints(self, vid: str, W, arc) -> np.ndarray:
+        """The route's waypoints in path coordinates ``(S_k, 0)``: ``S_k`` the projection of each
+        waypoint on its frame (``arc``: the waypoints' arc lengths, the projection's hints)."""
+        S = self._S.get(vid)
+        if S is None:
+            f = self.frame(vid, W)
+            S, _ = f.to_path(np.asarray(W, dtype=float), np.asarray(arc, dtype=float), window=1.0)
+            S = self._S[vid] = np.maximum.accumulate(S)  # a route's arc never runs back
+        return np.column_stack([S, np.zeros(len(S))])
+
+    def forget(self, vid: str) -> None:
+        self._frames.pop(vid, None)
+        self._S.pop(vid, None)
+
+    def stack(self, groups) -> PathStack:
+        """The stack of the frames of every vehicle in ``groups`` (in their order), rebuilt when
+        the fleet changed; :meth:`fid` gives a group's rows in it."""
+        key = tuple(v for g in groups if g.ids for v in g.ids)
+        if key != self._key:
+            self._stack = PathStack([self._frames[v] for v in key])
+            self._key = key
+            self._offset = {}
+            o = 0
+            for g in groups:
+                if g.ids:
+                    self._offset[id(g)] = o
+                    o += len(g.ids)
+        return self._stack
+
+    def fid(self, g) -> np.ndarray:
+        """Rows of group ``g``'s vehicles in the last :meth:`stack`."""
+        return self._offset[id(g)] + np.arange(len(g.ids))
+
+    def place(self, groups, g, offset: int = 0, rows=None) -> PathPlace:
+        """Group ``g``'s vehicles (``rows`` of them) placed in the world: frames, and their
+        waypoints ``k + offset`` in the world with the headings arriving there."""
+        stack = self.stack(groups)
+        cen, hd, _ = g.world_centres(offset)
+        fid = self.fid(g)
+        if rows is not None:
+            fid, cen, hd = fid[rows], cen[rows], hd[rows]
+        return PathPlace(stack, fid, cen, hd)
+
+    def pose(self, groups, g) -> tuple[np.ndarray, np.ndarray]:
+        """World centres (n, 2) and body headings (n,) of group ``g``'s vehicles."""
+        stack = self.stack(groups)
+        return stack.to_world(self.fid(g), g.X[:, 0], g.X[:, 1])
+
+    def state(self, groups, g) -> np.ndarray:
+        """World states ``(x, y, v_x, v_y)`` (n, 4) of group ``g``'s vehicles."""
+        stack = self.stack(groups)
+        fid = self.fid(g)
+        xy, _ = stack.to_world(fid, g.X[:, 0], g.X[:, 1])
+        return np.hstack([xy, stack.velocity(fid, g.X[:, 0], g.X[:, 2], g.X[:, 3])])
+
+    def entry_place(self, specs, centre, heading) -> PathPlace:
+        """Vehicles not yet in the network (``specs``), at rest on their first waypoints: a stack of
+        their own frames, their world first waypoints ``centre`` and headings ``heading``."""
+        frames = [self.frame(sp.id, sp.waypoints) for sp in specs]
+        return PathPlace(PathStack(frames), np.arange(len(frames)), np.asarray(centre, dtype=float).reshape(-1, 2),
+                         np.asarray(heading, dtype=float))

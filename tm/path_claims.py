@@ -1,0 +1,110 @@
+"""Reach claims of vehicles driven in path coordinates (:mod:`controllers.path`), as world boxes.
+
+A path-frame vehicle's plant runs in ``(s, n, v_s, v_n)``: its waypoints are ``(S_k, 0)`` with
+heading 0, so its claims (:func:`tm.reach.reach_claims`) are boxes of path coordinates,
+``[s_lo, s_hi] x [n_lo, n_hi]`` per slot (footprint not yet added).  In the world a slot is
+covered by :func:`tm.path_cover.stack_box_cover` (one box per path segment the interval meets,
+the body's full extent past every kink) and the slot's claim box is the bounding box of that cover
+in the frame of the vehicle's current waypoint in the world (its position ``W[k]`` and the
+heading of the segment arriving there, as a road-frame claim): sound (it holds every box of the
+cover), exact on a straight and for turns by a multiple of 90 degrees, and coarse on a curve.
+
+The claims are then :class:`tm.reach.ReachClaims` like any other, compared, shifted and reused
+with the same rules: the shift ``S_{k+1}(t) ⊇ S_k(t+1)`` holds in path coordinates, and the cover
+and its bounding box grow with the interval, so it holds in the world too.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from controllers.path import PathStack
+from tm.path_cover import cover_bounds, stack_box_cover
+from tm.reach import ReachClaims, ReachModel, reach_claims, split_pad
+
+__all__ = ["PathPlace", "path_reach_claims", "bare_model"]
+
+
+@dataclass(frozen=True, eq=False)
+class PathPlace:
+    """Where path-frame vehicles are in the world: their frames in ``stack`` (``fid`` (n,)) and the
+    world frame their claims are drawn in (``centre`` (n, 2), ``heading`` (n,): the current, or
+    requested, waypoint in the world and the heading of the segment arriving there)."""
+
+    stack: PathStack
+    fid: np.ndarray
+    centre: np.ndarray
+    heading: np.ndarray
+
+    def __post_init__(self) -> None:
+        n = len(self.fid)
+        if np.shape(self.centre) != (n, 2) or np.shape(self.heading) != (n,):
+            raise ValueError(f"PathPlace: fid ({n},) needs centre ({n}, 2) and heading ({n},), got "
+                             f"{np.shape(self.centre)} and {np.shape(self.heading)}")
+
+    def __len__(self) -> int:
+        return len(self.fid)
+
+    def take(self, idx) -> "PathPlace":
+        return PathPlace(self.stack, self.fid[idx], self.centre[idx], self.heading[idx])
+
+    @staticmethod
+    def concat(*parts: "PathPlace") -> "PathPlace":
+        if any(p.stack is not parts[0].stack for p in parts):
+            raise ValueError("PathPlace.concat: places on different stacks")
+        return PathPlace(parts[0].stack, np.concatenate([p.fid for p in parts]),
+                         np.vstack([p.centre for p in parts]), np.concatenate([p.heading for p in parts]))
+
+
+def bare_model(rm: ReachModel) -> ReachModel:
+    """``rm`` without a footprint: its claims are the position intervals alone."""
+    return replace(rm, length=0.0, width=0.0)
+
+
+def path_reach_claims(rm: ReachModel, bare: ReachModel, X, centre, index, place: PathPlace,
+                      body_pad=None) -> ReachClaims:
+    """World claims of path-frame vehicles of one class (module notes).
+
+    Parameters
+    ----------
+    rm : ReachModel
+        The class's model (its footprint ``length`` x ``width`` is laid along the path).
+    bare : ReachModel
+        ``bare_model(rm)`` (built once by the caller).
+    X : ndarray, shape (n, 4)
+        Path states ``(s, n, v_s, v_n)``.
+    centre : ndarray, shape (n, 2)
+        The waypoints in path coordinates, ``(S_k, 0)``.
+    index : ndarray of int, shape (n,)
+    place : PathPlace
+        The vehicles' frames and the world frames of their claims.
+    body_pad : ndarray (n, 2) or (n, 4), optional
+        Extra reach of the body beyond its rectangle (:func:`tm.reach.split_pad`), in the body's axes.
+    """
+    X = np.asarray(X, dtype=float)
+    n = len(X)
+    if len(place) != n:
+        raise ValueError(f"path_reach_claims: {n} states but {len(place)} places")
+    path = reach_claims(bare, X, centre, np.zeros(n), index)
+    K = path.lo.shape[1]
+    s_c = np.asarray(centre, dtype=float)[:, 0]
+    lo, hi = path.lo, path.hi
+    empty = ~((lo[..., 0] <= hi[..., 0]) & (lo[..., 1] <= hi[..., 1]))
+    s_lo = np.where(empty, 1.0, lo[..., 0] + s_c[:, None])
+    s_hi = np.where(empty, 0.0, hi[..., 0] + s_c[:, None])
+    n_lo = np.where(empty, 0.0, lo[..., 1])
+    n_hi = np.where(empty, 0.0, hi[..., 1])
+    hl, hw = 0.5 * rm.length, 0.5 * rm.width
+    if body_pad is not None:
+        plo, phi = split_pad(body_pad, n)
+        ext = [hl + plo[:, 0], hl + phi[:, 0], hw + plo[:, 1], hw + phi[:, 1]]
+    else:
+        ext = [np.full(n, hl), np.full(n, hl), np.full(n, hw), np.full(n, hw)]
+    rep = lambda a: np.repeat(np.asarray(a), K, axis=0)  # noqa: E731  (per vehicle -> per slot)
+    boxes = stack_box_cover(place.stack, rep(place.fid), s_lo.ravel(), s_hi.ravel(), n_lo.ravel(), n_hi.ravel(),
+                            *(rep(e) for e in ext))
+    wlo, whi = cover_bounds(boxes, rep(place.centre), rep(place.heading))
+    return ReachClaims(np.asarray(place.centre, dtype=float), np.asarray(place.heading, dtype=float),
+                       wlo.reshape(n, K, 2), whi.reshape(n, K, 2))
