@@ -568,7 +568,7 @@ class Cosim:
                 T = self.reach.models[sp.vclass].tables
                 lo = (float(T.p_lo[T.N]), float(T.y_lo[T.N]))
                 hi = (self._ahead(sp.vclass), float(T.y_hi[T.N]))
-                pads = fn(sp, lo, hi)
+                pads = fn(sp, lo, hi, "path") if self.paths is not None else fn(sp, lo, hi)
             if pads is None:
                 pads = np.zeros(4)
             self._pads[sp.id] = pads

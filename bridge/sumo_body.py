@@ -217,9 +217,9 @@ class RouteBody:
         corners = np.stack([front - side, front + side, back + side, back - side], axis=1)  # CCW, as tm.geometry
         return front, back, lane, corners
 
-    def pad_table(self, arc_k, W, H, box_lo, box_hi) -> "PadTable":
+    def pad_table(self, arc_k, W, H, box_lo, box_hi, frame: str = "road") -> "PadTable":
         """The :class:`PadTable` of this route for waypoints ``W`` (arcs ``arc_k``, headings ``H``)."""
-        return PadTable(self, arc_k, W, H, box_lo, box_hi)
+        return PadTable(self, arc_k, W, H, box_lo, box_hi, frame)
 
 
 class PadTable:
@@ -244,9 +244,20 @@ class PadTable:
         Along and across bounds, in a waypoint's frame, of every position a vehicle can hold
         while that waypoint is its current one (its sets' widest projection; the along upper
         bound includes :data:`AHEAD_M`).
+    frame : {"road", "path"}
+        ``road``: the rectangle lies along the waypoint's segment and the positions are in its
+        frame (a road-frame plant).  ``path``: a path-frame plant (:mod:`bridge.path_fleet`): the
+        positions are path coordinates (``box_lo, box_hi`` bound the arc from the waypoint and
+        the offset), the rectangle at a position lies along the route's segment there, and the
+        pads are in the rectangle's own axes (as :func:`tm.path_claims.path_reach_claims` adds
+        them); at a sample the segment's heading and the one before it are both taken (the body
+        turns at a vertex).
     """
 
-    def __init__(self, body: RouteBody, arc_k, W, H, box_lo, box_hi) -> None:
+    def __init__(self, body: RouteBody, arc_k, W, H, box_lo, box_hi, frame: str = "road") -> None:
+        if frame not in ("road", "path"):
+            raise ValueError(f"PadTable: frame must be 'road' or 'path', got {frame!r}")
+        self.frame = frame
         self.length, self.width = body.length, body.width
         self.arc_k = np.asarray(arc_k, dtype=float)
         self.W = np.asarray(W, dtype=float)
@@ -327,42 +338,51 @@ class PadTable:
         front, right, left) in waypoint ``k``'s frame, ``-inf`` where no position of the sample
         lies in the box."""
         out = np.full((j1 - j0, 4), -np.inf)
-        c, s = np.cos(self.H[k]), np.sin(self.H[k])
-        d = self.ref[j0:j1] - self.W[k]
-        a = c * d[..., 0] + s * d[..., 1]
-        y = -s * d[..., 0] + c * d[..., 1]
-        inside = ((a >= self.box_lo[0]) & (a <= self.box_hi[0]) &
-                  (y >= self.box_lo[1]) & (y <= self.box_hi[1])).any(axis=1)
+        inside, reach = self._reach(k, j0, j1)
+        if inside.any():
+            half = 0.5 * np.array([self.length, self.length, self.width, self.width])
+            out[inside] = reach.T - half
+        return out
+
+    def _reach(self, k: int, j0: int, j1: int) -> tuple[np.ndarray, np.ndarray]:
+        """Which samples ``j0 <= j < j1`` hold a position of waypoint ``k``'s box, and for those how
+        far SUMO's body reaches from the position (back, front, right, left; (4, m)), in waypoint
+        ``k``'s frame (road) or the route segment's at the sample (path), step term included."""
+        if self.frame == "road":
+            c, s = np.cos(self.H[k]), np.sin(self.H[k])
+            d = self.ref[j0:j1] - self.W[k]
+            a = c * d[..., 0] + s * d[..., 1]
+            y = -s * d[..., 0] + c * d[..., 1]
+            inside = ((a >= self.box_lo[0]) & (a <= self.box_hi[0]) &
+                      (y >= self.box_lo[1]) & (y <= self.box_hi[1])).any(axis=1)
+            hs = [np.full(int(inside.sum()), self.H[k])]
+        else:  # arc from the waypoint; every sampled offset lies within the box's (e_max)
+            a = self.sig[j0:j1] - self.arc_k[k]
+            inside = (a >= self.box_lo[0]) & (a <= self.box_hi[0])
+            seg = np.searchsorted(self.arc_k, self.sig[j0:j1][inside], side="right")
+            last = len(self.H) - 1
+            hs = [self.H[np.clip(seg, 1, last)], self.H[np.clip(seg - 1, 1, last)]]
         if not inside.any():
-            return out
+            return inside, np.zeros((4, 0))
         r = self.rel[j0:j1][inside]
         st = self.step[j0:j1][inside]
-        ra = c * r[..., 0] + s * r[..., 1]
-        ry = -s * r[..., 0] + c * r[..., 1]
-        reach = np.array([(-ra).max(axis=(1, 2)), ra.max(axis=(1, 2)),
-                          (-ry).max(axis=(1, 2)), ry.max(axis=(1, 2))]) + st
-        half = 0.5 * np.array([self.length, self.length, self.width, self.width])
-        out[inside] = reach.T - half
-        return out
+        reach = None
+        for h in hs:
+            c, s = np.cos(h)[:, None, None], np.sin(h)[:, None, None]
+            ra = c * r[..., 0] + s * r[..., 1]   # corners relative to the position, along the frame
+            ry = -s * r[..., 0] + c * r[..., 1]  # and across (left +)
+            got = np.array([(-ra).max(axis=(1, 2)), ra.max(axis=(1, 2)),
+                            (-ry).max(axis=(1, 2)), ry.max(axis=(1, 2))]) + st  # back, front, right, left
+            reach = got if reach is None else np.maximum(reach, got)
+        return inside, reach
 
     def _pads(self, k: int, j0: int) -> np.ndarray:
         """The reference computation of :meth:`pads` (one window start; tests compare the tables with it)."""
         j1 = int(np.searchsorted(self.sig, self.arc_k[k] + self.box_hi[0] + 2.0 * self.length, side="right"))
         if j1 <= j0:
             return np.zeros(4)
-        c, s = np.cos(self.H[k]), np.sin(self.H[k])
-        d = self.ref[j0:j1] - self.W[k]
-        a = c * d[..., 0] + s * d[..., 1]
-        y = -s * d[..., 0] + c * d[..., 1]
-        inside = ((a >= self.box_lo[0]) & (a <= self.box_hi[0]) &
-                  (y >= self.box_lo[1]) & (y <= self.box_hi[1])).any(axis=1)
+        inside, reach = self._reach(k, j0, j1)
         if not inside.any():
             return np.zeros(4)
-        r = self.rel[j0:j1][inside]
-        st = self.step[j0:j1][inside]
-        ra = c * r[..., 0] + s * r[..., 1]   # corners relative to the position, along the frame
-        ry = -s * r[..., 0] + c * r[..., 1]  # and across (left +)
-        reach = np.array([(-ra).max(axis=(1, 2)), ra.max(axis=(1, 2)),
-                          (-ry).max(axis=(1, 2)), ry.max(axis=(1, 2))]) + st  # back, front, right, left
         half = 0.5 * np.array([self.length, self.length, self.width, self.width])
         return np.maximum(reach.max(axis=1) - half, 0.0)

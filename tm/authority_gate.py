@@ -375,20 +375,46 @@ class AuthorityGate(JunctionGate):
         that one goes first: a vehicle waiting at its entry line does not move until it has the
         token, and a holder whose next claims meet it would stand inside the guard for good --
         ``grid`` seed 2: bus 84 took C1's token to turn left beside bus 80 waiting at its entry line,
-        and never moved again).  Vehicles on ``row``'s own route (its queue) do not count."""
-        others = [int(j) for j in waiters if j != row]
-        if not others:
+        and never moved again).  Vehicles on ``row``'s own route (its queue) do not count.
+
+        Only when the waiters it would let go first lead, yielding in turn, to one that yields to
+        nobody (who will take the token): where they only lead round a cycle (``grid`` seed 1 with
+        path-frame plants: the four approaches of one zone, each the next one's target, waited for
+        ever, 33 of 150 never arrived), nobody on it yields and the first in line takes the token."""
+        waiters = np.array([int(j) for j in waiters], dtype=np.intp)
+        if len(waiters) < 2:
             return False
-        mine = self._standing(fleet, row)
-        on = self._on_route(fleet, row, np.array(others, dtype=np.intp))
-        for j, q in zip(others, on.tolist()):
-            if q:
+        targets: dict[int, list[int]] = {}
+
+        def of(r: int) -> list[int]:
+            if r not in targets:
+                targets[r] = self._targets(fleet, r, z, waiters[waiters != r])
+            return targets[r]
+
+        seen, todo = {row}, list(of(row))
+        while todo:  # does a chain of targets from row end at a waiter that yields to nobody?
+            j = todo.pop()
+            if j in seen:
                 continue
-            if self._beyond_meets(fleet, row, z, self._standing(fleet, j)) and \
-                    not self._beyond_meets(fleet, j, z, mine):
+            seen.add(j)
+            nxt = of(j)
+            if not nxt:
                 self.yielded += 1
                 return True
+            todo.extend(nxt)
         return False
+
+    def _targets(self, fleet: JunctionFleet, row: int, z: int, others: np.ndarray) -> list[int]:
+        """The rows among ``others`` (not on ``row``'s route) that ``row`` would let go first
+        (:meth:`_yields`): its wide path beyond its stop point meets their standing box and theirs
+        misses its own."""
+        if not len(others):
+            return []
+        mine = self._standing(fleet, row)
+        on = self._on_route(fleet, row, others)
+        return [int(j) for j, q in zip(others.tolist(), on.tolist())
+                if not q and self._beyond_meets(fleet, row, z, self._standing(fleet, j))
+                and not self._beyond_meets(fleet, j, z, mine)]
 
     def _on_route(self, fleet: JunctionFleet, row: int, j: np.ndarray, ahead: int = 0) -> np.ndarray:
         """Which rows ``j`` have their requested stop point (``k + ahead``) on row ``row``'s route

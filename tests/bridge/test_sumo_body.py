@@ -84,6 +84,51 @@ def test_padding_covers_sumo_body(net, seed, frac, lat, edges, size):
     assert np.all(ry <= size_[1] / 2 + pad[3] + 1e-9)
 
 
+@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(st.integers(0, 10 ** 6), st.floats(0.0, 1.0), st.floats(-1.0, 1.0), st.sampled_from([LEFT, RIGHT, STRAIGHT]),
+       st.sampled_from(SIZES))
+def test_path_padding_covers_sumo_body_in_the_body_axes(net, seed, frac, lat, edges, size):
+    """A path-frame plant (``frame="path"``): for a reference point at arc ``sigma`` between a lower
+    arc and its waypoint, SUMO's body lies inside the rectangle ``L x W`` centred on it along the
+    route's segment there (the body of :func:`tm.path_claims.path_reach_claims`), widened by the
+    waypoint's padding in the rectangle's own axes.  Tolerance 1e-9 m, as above."""
+    r = _route(net, edges)
+    b = RouteBody(r, net, *size)
+    W, arc = r.waypoints, r.arc_length
+    H = _headings(W)
+    box_lo, box_hi = (-40.0, -OFFSET_MAX_M), (1.2, OFFSET_MAX_M)
+    table = b.pad_table(arc, W, H, box_lo, box_hi, frame="path")
+    k = int(np.random.default_rng(seed).integers(1, len(W)))
+    lo = max(arc[k] - 30.0, 0.0)
+    sigma = lo + frac * (arc[k] + box_hi[0] - lo)
+    s_, e_ = np.array([sigma]), np.array([lat * box_hi[1]])
+    _, _, _, corners = b.bodies(s_, e_)
+    q, t, _ = _at(b.poly, b.parc, s_)
+    p = q[0] + e_[0] * np.array([-t[0, 1], t[0, 0]])
+    h = H[min(int(np.searchsorted(arc, sigma, side="right")), len(H) - 1)]  # the segment's heading
+    pad = table.pads(k, lo)
+    rel = corners[0] - p
+    c, s = np.cos(h), np.sin(h)
+    ra, ry = c * rel[:, 0] + s * rel[:, 1], -s * rel[:, 0] + c * rel[:, 1]
+    assert np.all(-ra <= size[0] / 2 + pad[0] + 1e-9) and np.all(ra <= size[0] / 2 + pad[1] + 1e-9)
+    assert np.all(-ry <= size[1] / 2 + pad[2] + 1e-9) and np.all(ry <= size[1] / 2 + pad[3] + 1e-9)
+
+
+def test_path_padding_differs_from_the_road_frames_in_a_turn(net):
+    """In a left turn the two tables differ (the road table pads for the waypoint's heading, the
+    path table for the body's): some waypoint's road pads are too small for a path-aligned body."""
+    r = _route(net, LEFT)
+    b = RouteBody(r, net, *TRUCK)
+    W, arc = r.waypoints, r.arc_length
+    args = (arc, W, _headings(W), (-40.0, -OFFSET_MAX_M), (1.2, OFFSET_MAX_M))
+    road, path = b.pad_table(*args), b.pad_table(*args, frame="path")
+    P_road = np.array([road.pads(k, arc[k] - 10.0) for k in range(len(W))])
+    P_path = np.array([path.pads(k, arc[k] - 10.0) for k in range(len(W))])
+    assert np.abs(P_road - P_path).max() > 0.3
+    with pytest.raises(ValueError, match="frame must be 'road' or 'path'"):
+        b.pad_table(*args, frame="world")
+
+
 @pytest.mark.parametrize("edges", [LEFT, RIGHT])
 def test_padding_one_sided_in_a_turn(net, edges):
     """In a turn SUMO's body (the chord between front and back) lies off the rectangle's centre:

@@ -565,3 +565,31 @@ def test_a_turning_candidate_lets_a_waiter_beside_its_path_go_first():
     W_a, W_b = routes["A"][0], routes["B"][0]
     assert W_a[k["A"], 1] > 40.0 and W_b[k["B"], 1] < -20.0, (k, last)
     assert gate.yielded > 0
+
+
+def test_waiters_that_would_all_yield_round_a_cycle_do_not_all_wait():
+    """The yield rule's cycle (issue 12, ``grid`` seed 1 with path-frame plants: the four approaches
+    of one zone each yielded to the next, nobody took the token, 33 of 150 never arrived).  The
+    geometry is stubbed: ``meets[a][b]`` says whether a's path beyond its stop point meets b's
+    standing box.  Round a cycle nobody yields (the first in line takes the token); a waiter yields
+    to one that yields to nobody, and along a chain of such waiters to its end; where its targets
+    lead only round a cycle it does not wait."""
+    gate = AuthorityGate([J], {"narrow": NARROW})
+
+    def with_relation(meets):
+        gate._standing = lambda fleet, row: row                              # noqa: E731
+        gate._beyond_meets = lambda fleet, row, z, box: box in meets[row]    # noqa: E731
+        gate._on_route = lambda fleet, row, j, ahead=0: np.zeros(len(j), dtype=bool)  # noqa: E731
+
+    waiters = np.arange(4)
+    with_relation({0: {1}, 1: {2}, 2: {3}, 3: {0}})  # each meets the next: a cycle of four
+    assert [gate._yields(None, r, 0, waiters) for r in range(4)] == [False] * 4
+    with_relation({0: {1}, 1: set(), 2: set(), 3: set()})  # 0 meets 1, 1 meets nobody: 0 lets 1 go
+    assert gate._yields(None, 0, 0, waiters) and not gate._yields(None, 1, 0, waiters)
+    with_relation({0: {1}, 1: {2}, 2: set(), 3: set()})  # a chain: 1 yields to 2, and 0 to 1
+    assert gate._yields(None, 1, 0, waiters) and gate._yields(None, 0, 0, waiters)
+    assert not gate._yields(None, 2, 0, waiters)
+    with_relation({0: {1}, 1: {2}, 2: {3}, 3: {1}})  # 0 leads into the cycle 1 -> 2 -> 3 -> 1: nobody waits
+    assert [gate._yields(None, r, 0, waiters) for r in range(4)] == [False] * 4
+    with_relation({0: {1}, 1: {0}, 2: set(), 3: set()})  # mutual: neither is a target (paths meet both ways)
+    assert not gate._yields(None, 0, 0, waiters) and not gate._yields(None, 1, 0, waiters)
