@@ -250,8 +250,10 @@ class PadTable:
         positions are path coordinates (``box_lo, box_hi`` bound the arc from the waypoint and
         the offset), the rectangle at a position lies along the route's segment there, and the
         pads are in the rectangle's own axes (as :func:`tm.path_claims.path_reach_claims` adds
-        them); at a sample the segment's heading and the one before it are both taken (the body
-        turns at a vertex).
+        them).  A sample takes the heading of the segment it lies on (right-continuous, as
+        :meth:`controllers.path.PathFrame.to_world`); the pose at a vertex with the arriving
+        segment's heading, which the claims cover too, is the limit of the poses before it: the
+        sample before the vertex and the step term hold it.
     """
 
     def __init__(self, body: RouteBody, arc_k, W, H, box_lo, box_hi, frame: str = "road") -> None:
@@ -360,8 +362,7 @@ class PadTable:
             a = self.sig[j0:j1] - self.arc_k[k]
             inside = (a >= self.box_lo[0]) & (a <= self.box_hi[0])
             seg = np.searchsorted(self.arc_k, self.sig[j0:j1][inside], side="right")
-            last = len(self.H) - 1
-            hs = [self.H[np.clip(seg, 1, last)], self.H[np.clip(seg - 1, 1, last)]]
+            hs = [self.H[np.clip(seg, 1, len(self.H) - 1)]]
         if not inside.any():
             return inside, np.zeros((4, 0))
         r = self.rel[j0:j1][inside]

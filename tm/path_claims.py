@@ -8,6 +8,9 @@ the body's full extent past every kink) and the slot's claim box is the bounding
 in the frame of the vehicle's current waypoint in the world (its position ``W[k]`` and the
 heading of the segment arriving there, as a road-frame claim): sound (it holds every box of the
 cover), exact on a straight and for turns by a multiple of 90 degrees, and coarse on a curve.
+So the claims also keep the cover itself (:class:`tm.slot_boxes.SlotBoxes`, the claims'
+``tight`` boxes): the ``timed`` check compares those, box by box; the ``union`` check and the
+junction layer use the waypoint-frame boxes.
 
 The claims are then :class:`tm.reach.ReachClaims` like any other, compared, shifted and reused
 with the same rules: the shift ``S_{k+1}(t) ⊇ S_k(t+1)`` holds in path coordinates, and the cover
@@ -23,6 +26,7 @@ import numpy as np
 from controllers.path import PathStack
 from tm.path_cover import cover_bounds, stack_box_cover
 from tm.reach import ReachClaims, ReachModel, reach_claims, split_pad
+from tm.slot_boxes import SlotBoxes
 
 __all__ = ["PathPlace", "path_reach_claims", "bare_model"]
 
@@ -106,5 +110,7 @@ def path_reach_claims(rm: ReachModel, bare: ReachModel, X, centre, index, place:
     boxes = stack_box_cover(place.stack, rep(place.fid), s_lo.ravel(), s_hi.ravel(), n_lo.ravel(), n_hi.ravel(),
                             *(rep(e) for e in ext))
     wlo, whi = cover_bounds(boxes, rep(place.centre), rep(place.heading))
+    # the cover itself, box by box: on a curve the waypoint's frame bounds it coarsely (a bus body
+    # at 45 degrees to it reaches 4.5 m across), and it nests as the interval does
     return ReachClaims(np.asarray(place.centre, dtype=float), np.asarray(place.heading, dtype=float),
-                       wlo.reshape(n, K, 2), whi.reshape(n, K, 2))
+                       wlo.reshape(n, K, 2), whi.reshape(n, K, 2), SlotBoxes.from_cover(boxes, n, K))

@@ -48,6 +48,7 @@ from controllers.stmpc import FactorMembership
 from controllers.synthesis import SetFamily, along_factor, rotate_pairs
 from controllers.tolerances import GEOMETRY_TOL, REACH_LOOKUP_MARGIN
 from tm.geometry import broad_phase
+from tm.slot_boxes import SlotBoxes
 
 __all__ = ["ReachModel", "ReachClaims", "reach_claims", "claims_conflict", "pairwise_conflicts", "world_aabb",
            "candidate_pairs", "pad_slots", "split_pad", "slot_aabb", "union_aabb", "PREFILTER_TOL_FACTOR"]
@@ -140,12 +141,18 @@ class ReachClaims:
     lo, hi : ndarray, shape (n, K, 2)
         Box corners in the segment frame, footprint included; slot ``j`` is ``k = j + 1``.
         An empty box (``lo > hi``) never conflicts.
+    tight : SlotBoxes, optional
+        The slots as unions of oriented boxes (path-frame vehicles, :mod:`tm.path_claims`: one box
+        per path segment, where the waypoint's frame bounds a curve coarsely), inside ``lo, hi``.
+        When given, the ``timed`` check and :attr:`slot_boxes` use them; the ``union`` check,
+        :func:`world_aabb` and the drawings use ``lo, hi``.
     """
 
     centre: np.ndarray
     heading: np.ndarray
     lo: np.ndarray
     hi: np.ndarray
+    tight: SlotBoxes | None = None
 
     def __len__(self) -> int:
         return len(self.centre)
@@ -155,7 +162,15 @@ class ReachClaims:
         """World bounding boxes of every slot, ``(4, n, K)``: ``x_lo, x_hi, y_lo, y_hi`` (empty
         slots inverted: ``+inf, -inf``); computed on first use, carried by :meth:`shift`,
         :meth:`take` and :meth:`concat` when present."""
+        if self.tight is not None:
+            return self.tight.aabb()
         return slot_aabb(self.centre, self.heading, self.lo, self.hi)
+
+    def slot_union(self) -> SlotBoxes:
+        """The slots as unions of boxes: :attr:`tight`, or the claims' own boxes (one per slot)."""
+        if self.tight is not None:
+            return self.tight
+        return SlotBoxes.from_frames(self.centre, self.heading, self.lo, self.hi)
 
     def _with_boxes(self, boxes) -> "ReachClaims":
         if boxes is not None:
@@ -168,15 +183,16 @@ class ReachClaims:
     def shift(self) -> "ReachClaims":
         """``S_{k+1}(t)`` as the claims for ``t + 1`` (reuse for vehicles not granted):
         drop slot 1, repeat the last (``T^0``, every later step)."""
-        lo = np.concatenate([self.lo[:, 1:], self.lo[:, -1:]], axis=1)
-        hi = np.concatenate([self.hi[:, 1:], self.hi[:, -1:]], axis=1)
+        sh = lambda a: np.concatenate([a[:, 1:], a[:, -1:]], axis=1)  # noqa: E731
         b = self._boxes()
-        return ReachClaims(self.centre, self.heading, lo, hi)._with_boxes(
+        return ReachClaims(self.centre, self.heading, sh(self.lo), sh(self.hi),
+                           None if self.tight is None else self.tight.shift())._with_boxes(
             None if b is None else np.concatenate([b[:, :, 1:], b[:, :, -1:]], axis=2))
 
     def take(self, idx) -> "ReachClaims":
         b = self._boxes()
-        return ReachClaims(self.centre[idx], self.heading[idx], self.lo[idx], self.hi[idx])._with_boxes(
+        return ReachClaims(self.centre[idx], self.heading[idx], self.lo[idx], self.hi[idx],
+                           None if self.tight is None else self.tight.take(idx))._with_boxes(
             None if b is None else np.take(b, idx, axis=1))
 
     @staticmethod
@@ -189,8 +205,12 @@ class ReachClaims:
             last = a[:, -1:] if axis == 1 else a[:, :, -1:]
             return np.concatenate([a, np.repeat(last, extra, axis=axis)], axis=axis)
         boxes = [p._boxes() for p in parts]
+        tight = None
+        if any(p.tight is not None for p in parts):
+            tight = SlotBoxes.concat(*(p.slot_union().pad(K) for p in parts))
         out = ReachClaims(np.concatenate([p.centre for p in parts]), np.concatenate([p.heading for p in parts]),
-                          np.concatenate([pad(p.lo) for p in parts]), np.concatenate([pad(p.hi) for p in parts]))
+                          np.concatenate([pad(p.lo) for p in parts]), np.concatenate([pad(p.hi) for p in parts]),
+                          tight)
         if all(b is not None for b in boxes):
             out._with_boxes(np.concatenate([pad(b, axis=2) for b in boxes], axis=1))
         return out
@@ -316,7 +336,8 @@ def pad_slots(c: ReachClaims, K: int) -> ReachClaims:
         raise ValueError(f"pad_slots: claims have {k} slots, more than {K}")
     rep = lambda a: np.concatenate([a, np.repeat(a[:, -1:], K - k, axis=1)], axis=1)  # noqa: E731
     b = c._boxes()
-    return ReachClaims(c.centre, c.heading, rep(c.lo), rep(c.hi))._with_boxes(
+    return ReachClaims(c.centre, c.heading, rep(c.lo), rep(c.hi),
+                       None if c.tight is None else c.tight.pad(K))._with_boxes(
         None if b is None else np.concatenate([b, np.repeat(b[:, :, -1:], K - k, axis=2)], axis=2))
 
 
@@ -355,8 +376,10 @@ def _slot_sat(a: ReachClaims, i, b: ReachClaims, j, k, tol: float) -> np.ndarray
     """The separating-axis test of slot ``k[t]`` of ``a[i[t]]`` and ``b[j[t]]`` (slots past a
     shorter horizon are its last slot)."""
     ka, kb = np.minimum(k, a.lo.shape[1] - 1), np.minimum(k, b.lo.shape[1] - 1)
-    return _boxes_overlap(a.centre[i], a.heading[i], a.lo[i, ka], a.hi[i, ka],
-                          b.centre[j], b.heading[j], b.lo[j, kb], b.hi[j, kb], tol)
+    if a.tight is None and b.tight is None:
+        return _boxes_overlap(a.centre[i], a.heading[i], a.lo[i, ka], a.hi[i, ka],
+                              b.centre[j], b.heading[j], b.lo[j, kb], b.hi[j, kb], tol)
+    return a.slot_union().meet(i, ka, b.slot_union(), j, kb, tol)
 
 
 def _timed_conflicts(a: ReachClaims, i, b: ReachClaims, j, tol: float) -> np.ndarray:

@@ -37,6 +37,7 @@ from controllers.synthesis import rotate_pairs
 from controllers.tolerances import GEOMETRY_TOL
 from tm.path_claims import PathPlace
 from tm.reach import ReachClaims, pad_slots
+from tm.slot_boxes import SlotBoxes
 from tm.reach_book import ReachBook
 
 __all__ = ["ClaimCache", "CacheStats", "REASONS"]
@@ -209,6 +210,17 @@ class ClaimCache:
         reuse, j = self._reusable(t, ids, cls, X, centre, heading, index, pad)
         r = np.flatnonzero(reuse)
         lo, hi, boxes = np.empty((n, self.K, 2)), np.empty((n, self.K, 2)), np.empty((4, n, self.K))
+        # path-frame claims carry their slots as unions of boxes (ReachClaims.tight): kept alike
+        pieces = []  # (rows, SlotBoxes of those rows)
+        if len(r) and place is not None:
+            old_t = self._last.claims.slot_union().shift()
+            keep = r
+            if self._last.new is not None:
+                q = self._last.new_pos[j[r]]
+                if (q >= 0).any():
+                    pieces.append((r[q >= 0], self._last.new.slot_union().shift().pad(self.K).take(q[q >= 0])))
+                    keep = r[q < 0]
+            pieces.append((keep, old_t.take(j[keep])))
         if len(r):  # slot k <- slot k + 1 of the stored claims, the last one kept (ReachClaims.shift)
             old = self._last.claims
             g_lo, g_hi, g_b = old.lo, old.hi, old.slot_boxes
@@ -239,6 +251,8 @@ class ClaimCache:
                                                   None if pad is None else pad[g],
                                                   None if place is None else place.take(g)), self.K)
             lo[g], hi[g] = fresh.lo, fresh.hi
+            if place is not None:
+                pieces.append((g, fresh.slot_union()))
             fb = fresh.slot_boxes
             for q in range(4):  # per plane: a scatter along the middle axis is slow
                 boxes[q, g] = fb[q]
@@ -246,7 +260,8 @@ class ClaimCache:
         self.stats.reused += len(r)
         self.stats.fresh += len(f)
         out = (ReachClaims(centre, heading, lo, hi) if place is None
-               else ReachClaims(place.centre, place.heading, lo, hi))._with_boxes(boxes)
+               else ReachClaims(place.centre, place.heading, lo, hi,
+                                SlotBoxes.assemble(n, self.K, pieces)))._with_boxes(boxes)
         if pad is not None and len(r):  # a shifted row keeps the (larger) pad it was built with
             pad = pad.copy()
             pad[r] = self._last.pad[j[r]]

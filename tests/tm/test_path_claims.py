@@ -116,8 +116,9 @@ def car():
 def test_path_claims_hold_the_body_at_every_step_of_their_tube(seed, policy):
     """A car driven in path coordinates round a random route (every kink up to 60 degrees), its stop
     point a random waypoint ahead: for each k, the body at x(t+k) lies in the world box S_k(t) (its
-    corners, within GEOMETRY_TOL), x(t+1) is no tube escape, and the claims of t+1 nest in the
-    shifted claims of t."""
+    corners, within GEOMETRY_TOL), in one box of the slot's cover and in its world bounding box,
+    x(t+1) is no tube escape, and the claims of t+1 nest in the shifted claims of t (the
+    waypoint-frame boxes, and the covers box by box)."""
     vc, ctl, book = car()
     rng = np.random.default_rng(seed)
     W = random_polyline(rng, 12, min_len=3.0, max_len=15.0, max_turn_deg=60.0)
@@ -151,13 +152,35 @@ def test_path_claims_hold_the_body_at_every_step_of_their_tube(seed, policy):
             ok = (nxt.lo >= sh.lo - GEOMETRY_TOL) & (nxt.hi <= sh.hi + GEOMETRY_TOL)
             empty = nxt.lo > nxt.hi
             assert np.all(ok | empty.any(axis=-1, keepdims=True))
+            # and box by box: every box of a fresh slot lies in one box of the shifted slot
+            nt, st_ = nxt.tight, sh.tight
+            for jj in range(rm.K):
+                for b in range(nt.start[0, jj], nt.start[0, jj] + nt.count[0, jj]):
+                    from tm.geometry import rectangles
+                    corners = nt.centre[b] + rectangles(np.array([nt.heading[b]]), np.array([2 * nt.half[b, 0]]),
+                                                        np.array([2 * nt.half[b, 1]]))[0]
+                    assert _in_one_box(st_, 0, jj, corners), jj
         body.append(path_footprints(frame, X[:, 0], X[:, 1], vc.length, vc.width)[0])
         l = l_new
     assert escapes == 0
+    t = claims.tight  # the slots as unions of boxes (what the timed check compares)
     for k, C in enumerate(body, start=1):
         j = min(k, rm.K) - 1
         local = rotate_pairs(C - claims.centre[0], -np.repeat(claims.heading[0], 4))
         assert np.all(local >= claims.lo[0, j] - GEOMETRY_TOL) and np.all(local <= claims.hi[0, j] + GEOMETRY_TOL), k
+        assert _in_one_box(t, 0, j, C), k
+        b = claims.slot_boxes[:, 0, j]  # and its world box, the timed check's pre-filter
+        assert C[:, 0].min() >= b[0] - GEOMETRY_TOL and C[:, 0].max() <= b[1] + GEOMETRY_TOL
+        assert C[:, 1].min() >= b[2] - GEOMETRY_TOL and C[:, 1].max() <= b[3] + GEOMETRY_TOL
+
+
+def _in_one_box(sb, i, k, C) -> bool:
+    """Whether the corners ``C`` (4, 2) lie in one box of slot ``k`` of row ``i`` (GEOMETRY_TOL)."""
+    for b in range(sb.start[i, k], sb.start[i, k] + sb.count[i, k]):
+        local = rotate_pairs(C - sb.centre[b], -np.repeat(sb.heading[b], 4))
+        if np.all(np.abs(local) <= sb.half[b] + GEOMETRY_TOL):
+            return True
+    return False
 
 
 def test_a_body_outside_its_slot_is_a_tube_escape_whatever_its_heading():
@@ -177,3 +200,44 @@ def test_a_body_outside_its_slot_is_a_tube_escape_whatever_its_heading():
     assert not tube_escapes(claims, xy, L, Wd, body_heading=h)[0]
     assert tube_escapes(claims, xy + [[0.0, claims.hi[0, 0, 0] + 1.0]], L, Wd, body_heading=h)[0]
     assert tube_escapes(claims, xy, L, Wd, body_heading=h + 0.5 * np.pi)[0]  # a car across its lane
+
+
+def test_the_timed_check_compares_the_slots_own_boxes():
+    """Two claims whose waypoint-frame boxes overlap in slot 1 but whose covers (``tight``) are 1 m
+    apart: ``timed`` sees no conflict, ``union`` (waypoint-frame boxes) does; moved together the
+    covers conflict under ``timed`` too.  Concatenated with a claim without a cover (a road-frame
+    vehicle) the check still compares that one's own box; a slot of two boxes meets through
+    either; shift, take and padding move the covers with the claims."""
+    from tm.reach import ReachClaims, claims_conflict, pad_slots
+    from tm.slot_boxes import SlotBoxes
+
+    K = 2
+    coarse_lo = np.array([[[-3.0, -3.0]] * K])
+    coarse_hi = np.array([[[3.0, 3.0]] * K])
+
+    def claim(x, with_tight=True, extra=None):
+        tight = None
+        if with_tight:
+            tight = SlotBoxes.from_frames(np.array([[x, 0.0]]), np.zeros(1), np.array([[[-0.5, -0.5]] * K]),
+                                          np.array([[[0.5, 0.5]] * K]))
+            if extra is not None:  # slot 1: boxes at x and x + extra; slot 2: the box at x
+                tight = SlotBoxes(np.array([[x, 0.0], [x + extra, 0.0], [x, 0.0]]), np.zeros(3),
+                                  np.full((3, 2), 0.5), np.array([[0, 2]]), np.array([[2, 1]]))
+        return ReachClaims(np.array([[x, 0.0]]), np.zeros(1), coarse_lo, coarse_hi, tight)
+
+    far = ReachClaims.concat(claim(0.0), claim(2.0))      # coarse boxes overlap, covers 1 m apart
+    assert not claims_conflict(far, [0], far, [1], "timed")[0]
+    assert claims_conflict(far, [0], far, [1], "union")[0]
+    near = ReachClaims.concat(claim(0.0), claim(0.9))
+    assert claims_conflict(near, [0], near, [1], "timed")[0]
+    two = ReachClaims.concat(claim(0.0, extra=1.2), claim(2.0))  # slot 1's second box reaches 2.2 - 0.5
+    assert claims_conflict(two, [0], two, [1], "timed")[0]
+    assert not claims_conflict(two.shift(), [0], two.shift(), [1], "timed")[0]  # slot 2 has one box
+    mixed = ReachClaims.concat(claim(0.0), claim(3.0, with_tight=False))  # its own box reaches down to x = 0
+    assert claims_conflict(mixed, [0], mixed, [1], "timed")[0]
+    mixed = ReachClaims.concat(claim(0.0), claim(4.0, with_tight=False))  # down to x = 1: clear of 0.5
+    assert not claims_conflict(mixed, [0], mixed, [1], "timed")[0]
+    assert mixed.take([1]).tight.centre[mixed.take([1]).tight.start[0, 0]][0] == 4.0
+    assert pad_slots(claim(0.0), 5).tight.count.shape == (1, 5)
+    b = two.slot_boxes  # the pre-filter's world boxes hold both boxes of slot 1
+    assert b[0, 0, 0] == -0.5 and b[1, 0, 0] == 1.7

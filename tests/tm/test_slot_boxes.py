@@ -1,0 +1,79 @@
+"""Claim slots as unions of oriented boxes (tm/slot_boxes.py): index moves, compaction, world
+boxes and the pairwise test against brute force.  Exact comparisons: the index moves copy floats;
+the world boxes and the separating-axis test are compared with the same float expressions."""
+
+import numpy as np
+from hypothesis import given, settings, strategies as st
+
+from tm.reach import _boxes_overlap
+from tm.slot_boxes import SlotBoxes
+
+
+def _random(rng, n, K):
+    count = rng.integers(0, 4, (n, K))
+    q = int(count.sum())
+    perm = rng.permutation(n * K)  # slots' runs in a shuffled order of the flat list
+    start = np.zeros(n * K, dtype=np.intp)
+    o = 0
+    for f in perm:
+        start[f] = o
+        o += count.ravel()[f]
+    return SlotBoxes(rng.uniform(-20, 20, (q, 2)), rng.uniform(-np.pi, np.pi, q), rng.uniform(0.1, 3.0, (q, 2)),
+                     start.reshape(n, K), count)
+
+
+def _boxes_of(sb, i, k):
+    return list(range(sb.start[i, k], sb.start[i, k] + sb.count[i, k]))
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 2**32 - 1))
+def test_slot_boxes_against_brute_force(seed):
+    rng = np.random.default_rng(seed)
+    n, K = int(rng.integers(1, 5)), int(rng.integers(1, 5))
+    a, b = _random(rng, n, K), _random(rng, n, K)
+    box = a.aabb()
+    for i in range(n):
+        for k in range(K):
+            ids = _boxes_of(a, i, k)
+            if not ids:
+                assert box[0, i, k] == np.inf and box[1, i, k] == -np.inf
+                continue
+            c, s = np.abs(np.cos(a.heading[ids])), np.abs(np.sin(a.heading[ids]))
+            ex = c * a.half[ids, 0] + s * a.half[ids, 1]
+            assert box[0, i, k] == (a.centre[ids, 0] - ex).min() and box[1, i, k] == (a.centre[ids, 0] + ex).max()
+    i, ka = rng.integers(0, n, 40), rng.integers(0, K, 40)
+    j, kb = rng.integers(0, n, 40), rng.integers(0, K, 40)
+    got = a.meet(i, ka, b, j, kb, 1e-9)
+    for t in range(40):
+        want = any(_boxes_overlap(a.centre[p], a.heading[p], -a.half[p], a.half[p],
+                                  b.centre[q], b.heading[q], -b.half[q], b.half[q], 1e-9)
+                   for p in _boxes_of(a, i[t], ka[t]) for q in _boxes_of(b, j[t], kb[t]))
+        assert got[t] == want
+    # index moves and compaction keep every slot's boxes
+    c = a.compact()
+    assert len(c.heading) == int(a.count.sum())
+    for i2 in range(n):
+        for k in range(K):
+            assert np.array_equal(a.centre[_boxes_of(a, i2, k)], c.centre[_boxes_of(c, i2, k)])
+    sh = a.shift()
+    assert np.array_equal(sh.count[:, :-1], a.count[:, 1:]) and np.array_equal(sh.count[:, -1], a.count[:, -1])
+    sb = sh.aabb()  # the last slot's run is used twice: the world boxes take the other reduction
+    assert np.array_equal(sb[:, :, :-1], box[:, :, 1:]) and np.array_equal(sb[:, :, -1], box[:, :, -1])
+    rows = rng.permutation(n)
+    asm = SlotBoxes.assemble(2 * n, K, [(np.arange(n), a.take(rows)), (np.arange(n, 2 * n), b)])
+    for r in range(n):
+        for k in range(K):
+            assert np.array_equal(asm.half[_boxes_of(asm, r, k)], a.half[_boxes_of(a, rows[r], k)])
+            assert np.array_equal(asm.half[_boxes_of(asm, n + r, k)], b.half[_boxes_of(b, r, k)])
+    cat = SlotBoxes.concat(a.pad(K), b)
+    assert cat.shape == (2 * n, K) and len(cat.heading) == int(a.count.sum() + b.count.sum())
+
+
+def test_from_frames_one_box_per_non_empty_slot():
+    lo = np.array([[[-1.0, -1.0], [1.0, 0.0]]])
+    hi = np.array([[[1.0, 2.0], [0.0, 1.0]]])  # slot 2 empty (lo > hi along)
+    sb = SlotBoxes.from_frames(np.array([[10.0, 0.0]]), np.array([0.5 * np.pi]), lo, hi)
+    assert sb.count.tolist() == [[1, 0]]
+    np.testing.assert_allclose(sb.centre[0], [10.0 - 0.5, 0.0], atol=1e-12)  # (0, 0.5) turned by 90 deg
+    np.testing.assert_allclose(sb.half[0], [1.0, 1.5])

@@ -1,0 +1,177 @@
+"""Claim slots as unions of oriented boxes (path-frame vehicles' exact covers, :mod:`tm.path_claims`).
+
+A path-frame vehicle's slot ``S_k`` is the cover of a path interval: one oriented box per path
+segment the interval meets (:func:`tm.path_cover.stack_box_cover`).  Kept as that union, a slot
+nests exactly as its interval does (``S_k(t+1) ⊆ S_{k+1}(t)``: the cover of a sub-interval lies in
+the cover of the interval, box by box), which a single bounding box in a frame chosen per slot
+does not: a fresh slot bounded in a new frame can stick out of the old one (measured: ``grid``
+seed 1, nine claim violations between fresh claims).  Two slots meet iff some box of one meets
+some box of the other (separating-axis test per pair of boxes).
+
+:class:`SlotBoxes` holds the boxes of ``n`` vehicles' ``K`` slots as one flat list of boxes and,
+per vehicle and slot, the first box and the count; shifting, taking rows and padding slots only
+move those indices.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["SlotBoxes"]
+
+
+@dataclass(frozen=True, eq=False)
+class SlotBoxes:
+    """Oriented boxes ``centre + R(heading) [-half, half]`` (flat, ``q`` of them) and the boxes of
+    each vehicle's slots: ``start``, ``count`` (n, K) (a slot with no box is empty)."""
+
+    centre: np.ndarray
+    heading: np.ndarray
+    half: np.ndarray
+    start: np.ndarray
+    count: np.ndarray
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self.start.shape
+
+    @staticmethod
+    def from_frames(centre, heading, lo, hi) -> "SlotBoxes":
+        """One box per slot: ``centre`` (n, 2) or (n, K, 2), ``heading`` (n,) or (n, K), ``lo, hi``
+        (n, K, 2) in those frames (empty where ``lo > hi``)."""
+        lo, hi = np.asarray(lo, dtype=float), np.asarray(hi, dtype=float)
+        n, K = lo.shape[:2]
+        C = np.broadcast_to(np.asarray(centre, dtype=float).reshape(n, -1, 2), (n, K, 2))
+        H = np.broadcast_to(np.asarray(heading, dtype=float).reshape(n, -1), (n, K))
+        ok = (lo[..., 0] <= hi[..., 0]) & (lo[..., 1] <= hi[..., 1])
+        m = np.flatnonzero(ok.ravel())
+        L, U = lo.reshape(-1, 2)[m], hi.reshape(-1, 2)[m]
+        mid, h = 0.5 * (L + U), H.reshape(-1)[m]
+        c, s = np.cos(h), np.sin(h)
+        cen = C.reshape(-1, 2)[m] + np.column_stack([c * mid[:, 0] - s * mid[:, 1], s * mid[:, 0] + c * mid[:, 1]])
+        count = ok.astype(np.intp)
+        start = (np.cumsum(count.ravel()) - count.ravel()).reshape(n, K)
+        return SlotBoxes(cen, h, 0.5 * (U - L), start, count)
+
+    @staticmethod
+    def from_cover(boxes, n: int, K: int) -> "SlotBoxes":
+        """From :class:`tm.path_cover.PathBoxes` of ``n * K`` intervals (vehicle-major)."""
+        return SlotBoxes(boxes.centre, boxes.heading, boxes.half, boxes.start.reshape(n, K),
+                         boxes.count.reshape(n, K))
+
+    # ------------------------------------------------------------------ index moves
+    def _with(self, start, count) -> "SlotBoxes":
+        return SlotBoxes(self.centre, self.heading, self.half, start, count)
+
+    def shift(self) -> "SlotBoxes":
+        """Slot ``k`` <- slot ``k + 1``, the last repeated (:meth:`tm.reach.ReachClaims.shift`)."""
+        sh = lambda a: np.concatenate([a[:, 1:], a[:, -1:]], axis=1)  # noqa: E731
+        return self._with(sh(self.start), sh(self.count))
+
+    def take(self, idx) -> "SlotBoxes":
+        return self._with(self.start[idx], self.count[idx])
+
+    def pad(self, K: int) -> "SlotBoxes":
+        """``K`` slots, the last repeated."""
+        k = self.start.shape[1]
+        if k >= K:
+            return self
+        rep = lambda a: np.concatenate([a, np.repeat(a[:, -1:], K - k, axis=1)], axis=1)  # noqa: E731
+        return self._with(rep(self.start), rep(self.count))
+
+    @staticmethod
+    def concat(*parts: "SlotBoxes") -> "SlotBoxes":
+        """Rows of every part in order (same ``K``), boxes compacted."""
+        off = np.cumsum([0] + [len(p.heading) for p in parts[:-1]])
+        out = SlotBoxes(np.vstack([p.centre for p in parts]), np.concatenate([p.heading for p in parts]),
+                        np.vstack([p.half for p in parts]),
+                        np.vstack([p.start + o for p, o in zip(parts, off)]), np.vstack([p.count for p in parts]))
+        return out.compact()
+
+    @staticmethod
+    def assemble(n: int, K: int, pieces) -> "SlotBoxes":
+        """Rows ``rows`` (1-D) of the result from each ``(rows, SlotBoxes)`` of ``pieces`` (with as
+        many rows, ``K`` slots); every row must be given once.  Boxes compacted."""
+        start = np.zeros((n, K), dtype=np.intp)
+        count = np.zeros((n, K), dtype=np.intp)
+        C, H, Hf, o = [], [], [], 0
+        for rows, sb in pieces:
+            start[rows] = sb.start + o
+            count[rows] = sb.count
+            C.append(sb.centre)
+            H.append(sb.heading)
+            Hf.append(sb.half)
+            o += len(sb.heading)
+        if not C:
+            return SlotBoxes(np.zeros((0, 2)), np.zeros(0), np.zeros((0, 2)), start, count)
+        return SlotBoxes(np.vstack(C), np.concatenate(H), np.vstack(Hf), start, count).compact()
+
+    def compact(self) -> "SlotBoxes":
+        """The same slots with only the boxes they use, in slot order."""
+        cnt = self.count.ravel()
+        total = int(cnt.sum())
+        if total == len(self.heading):
+            return self
+        first = np.cumsum(cnt) - cnt
+        src = np.repeat(self.start.ravel() - first, cnt) + np.arange(total)
+        return SlotBoxes(self.centre[src], self.heading[src], self.half[src], first.reshape(self.start.shape),
+                         self.count)
+
+    # ------------------------------------------------------------------ geometry
+    def aabb(self) -> np.ndarray:
+        """World bounding boxes ``(4, n, K)`` of every slot (empty: inverted, ``+inf, -inf``)."""
+        n, K = self.start.shape
+        out = np.empty((4, n, K))
+        out[0] = out[2] = np.inf
+        out[1] = out[3] = -np.inf
+        if not len(self.heading):
+            return out
+        c, s = np.abs(np.cos(self.heading)), np.abs(np.sin(self.heading))
+        ex = c * self.half[:, 0] + s * self.half[:, 1]
+        ey = s * self.half[:, 0] + c * self.half[:, 1]
+        cnt = self.count.ravel()
+        has = np.flatnonzero(cnt > 0)
+        at = self.start.ravel()[has]
+        # slots' boxes are contiguous but not ordered across slots: reduce each slot's run
+        order = np.argsort(at, kind="stable")
+        at_o, has_o = at[order], has[order]
+        ends = at_o + cnt[has_o]
+        if len(at_o) and np.all(at_o[1:] >= ends[:-1]):  # runs do not overlap: one reduceat
+            idx = np.empty(2 * len(at_o), dtype=np.intp)
+            idx[0::2], idx[1::2] = at_o, ends
+            vals = []
+            for v in (self.centre[:, 0] - ex, self.centre[:, 0] + ex, self.centre[:, 1] - ey, self.centre[:, 1] + ey):
+                vals.append(np.append(v, 0.0))
+            red = [np.minimum.reduceat(vals[0], idx)[0::2], np.maximum.reduceat(vals[1], idx)[0::2],
+                   np.minimum.reduceat(vals[2], idx)[0::2], np.maximum.reduceat(vals[3], idx)[0::2]]
+            for p in range(4):
+                out[p].reshape(-1)[has_o] = red[p]
+            return out
+        owner = np.repeat(has, cnt[has])
+        src = np.repeat(self.start.ravel()[has] - (np.cumsum(cnt[has]) - cnt[has]), cnt[has]) + np.arange(len(owner))
+        for p, v, f in ((0, self.centre[:, 0] - ex, np.minimum), (1, self.centre[:, 0] + ex, np.maximum),
+                        (2, self.centre[:, 1] - ey, np.minimum), (3, self.centre[:, 1] + ey, np.maximum)):
+            f.at(out[p].reshape(-1), owner, v[src])
+        return out
+
+    def meet(self, i, ka, other: "SlotBoxes", j, kb, tol: float) -> np.ndarray:
+        """For each ``t``: whether slot ``ka[t]`` of row ``i[t]`` meets slot ``kb[t]`` of ``other``'s
+        row ``j[t]`` (some pair of their boxes closer than ``tol``; empty slots never meet)."""
+        from tm.reach import _boxes_overlap  # the separating-axis test of the claims
+
+        i, ka, j, kb = (np.asarray(a, dtype=np.intp) for a in (i, ka, j, kb))
+        out = np.zeros(len(i), dtype=bool)
+        ca, cb = self.count[i, ka], other.count[j, kb]
+        m = ca * cb
+        if not m.sum():
+            return out
+        pair = np.repeat(np.arange(len(i)), m)
+        r = np.arange(len(pair)) - np.repeat(np.cumsum(m) - m, m)
+        a = self.start[i, ka][pair] + r // cb[pair]
+        b = other.start[j, kb][pair] + r % cb[pair]
+        hit = _boxes_overlap(self.centre[a], self.heading[a], -self.half[a], self.half[a],
+                             other.centre[b], other.heading[b], -other.half[b], other.half[b], tol)
+        np.logical_or.at(out, pair[hit], True)
+        return out
