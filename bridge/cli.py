@@ -114,8 +114,10 @@ def _cmd_run(args) -> int:
     if getattr(args, "vclass", "paper-a") is None:
         args.vclass = "car" if getattr(args, "controller", "paper") == "authority" else "paper-a"
     if args.scenario in FREE_PLANE:
-        for name, default in (("tm", "optimal"), ("check", "union"), ("switching", "early"),
-                              ("disturbance", "random")):
+        from tm.settings import default_check
+
+        for name, default in (("tm", "optimal"), ("check", default_check(getattr(args, "controller", "paper"))),
+                              ("switching", "early"), ("disturbance", "random")):
             if getattr(args, name) is None:
                 setattr(args, name, default)
         args.seed = 0 if args.seed is None else args.seed

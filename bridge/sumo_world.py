@@ -40,7 +40,7 @@ from controllers.classes import VehicleClass, VTypeParams, builtin_classes, vtyp
 from controllers.tolerances import HOLD_TOL_M, HOLD_TOL_RAD, POSE_TOL_M
 from bridge.sumo_body import BACK_M, RouteBody
 from tm.pedestrians import PedestrianRule, PedestrianSettings
-from tm.settings import TMSettings
+from tm.settings import TMSettings, default_check
 from tm.signals import SignalSettings
 
 #: Gap between a departing vehicle's back and the start of its first lane (m).
@@ -52,7 +52,7 @@ SUMO_DEFAULT_STEP_S = 1.0
 END_MARGIN_S = 60.0
 
 #: Options of a user's ``.sumocfg`` run when the command line leaves them out.
-SUMOCFG_DEFAULTS = {"tm": "optimal", "check": "union", "switching": "early", "disturbance": "random"}
+SUMOCFG_DEFAULTS = {"tm": "optimal", "switching": "early", "disturbance": "random"}  # check: default_check
 
 __all__ = ["SumoWorld", "junction_zones", "run_sumo"]
 
@@ -407,8 +407,9 @@ def run_sumo(target: str, out: Path, opts, observers_extra: list | None = None) 
                 limit = run_limit(deps, None)
                 duration = limit.duration_s
                 expand_end = begin + limit.window_s + 1.0  # every departure of the files, none cut at the edge
-            tm, check, switching, disturbance = (getattr(opts, k) or SUMOCFG_DEFAULTS[k]
-                                                 for k in ("tm", "check", "switching", "disturbance"))
+            tm, switching, disturbance = (getattr(opts, k) or SUMOCFG_DEFAULTS[k]
+                                          for k in ("tm", "switching", "disturbance"))
+            check = opts.check or default_check(getattr(opts, "controller", "paper"))
         else:
             scenario = load_scenario(target)
             if opts.seed is not None and scenario.demand is not None:  # --seed draws the demand too
@@ -420,7 +421,7 @@ def run_sumo(target: str, out: Path, opts, observers_extra: list | None = None) 
             if scenario.demand is not None:
                 summary["demand_seed"] = scenario.demand.seed
             tm = opts.tm or scenario.tm
-            check = opts.check or scenario.check
+            check = opts.check or scenario.check or default_check(getattr(opts, "controller", "paper"))
             switching = opts.switching or scenario.switching
             disturbance = opts.disturbance or scenario.disturbance
         signals = SignalSettings(mode=getattr(opts, "signals", None) or "obey")

@@ -56,6 +56,7 @@ from typing import Iterable, Sequence
 import pandas as pd
 
 from bridge.scenarios import SCENARIOS
+from tm.settings import default_check
 
 __all__ = ["SweepSettingsError", "SweepSettings", "RunSpec", "ROW_COLUMNS", "SUMMARY_KPIS", "VEHICLE_STATS",
            "COUNT_COLUMNS", "TABLE_COLUMNS", "OPTION_CHOICES", "CONTROLLER_DEFAULT", "plan", "run_plan", "sweep",
@@ -65,7 +66,7 @@ __all__ = ["SweepSettingsError", "SweepSettings", "RunSpec", "ROW_COLUMNS", "SUM
 #: Free-plane scenarios (run by :func:`bridge.scenarios.run_scenario`); everything else is SUMO.
 FREE_PLANE = SCENARIOS
 #: What ``muvsim run`` uses for a free-plane scenario's options left out (see ``bridge/cli.py``).
-FREE_PLANE_DEFAULTS = {"tm": "optimal", "check": "union", "switching": "early", "disturbance": "random"}
+FREE_PLANE_DEFAULTS = {"tm": "optimal", "switching": "early", "disturbance": "random"}  # check: default_check
 #: ``muvsim run --controller``'s default (every scenario): the paper's sets, cost and centred claims.
 CONTROLLER_DEFAULT = "paper"
 #: Valid values of every option that a sweep can vary.
@@ -284,6 +285,8 @@ class RunSpec:
             for name, default in FREE_PLANE_DEFAULTS.items():
                 if getattr(opts, name) is None:
                     setattr(opts, name, default)
+            if opts.check is None:
+                opts.check = default_check(opts.controller or CONTROLLER_DEFAULT)
         return opts
 
 

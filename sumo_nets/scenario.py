@@ -8,7 +8,7 @@ found by path.  Example (the built-in ``grid``)::
     seed = 1
     duration_s = 300.0
     tm = "optimal"          # greedy | optimal
-    check = "union"         # union | timed
+    # check = "timed"         # union | timed; default: timed with --controller authority, union with paper
     switching = "early"     # terminal | early
 
     [net]
@@ -242,8 +242,9 @@ class Scenario:
         Simulated time (s, > 0).
     tm : {"greedy", "optimal"}
         Traffic-manager policy.
-    check : {"union", "timed"}
-        Tube conflict check.
+    check : {"union", "timed"} or None
+        Tube conflict check; None (the default): the controller's (:func:`tm.settings.default_check`:
+        ``timed`` with ``--controller authority``, ``union`` with ``paper``).
     switching : {"terminal", "early"}
         When vehicles ask to switch waypoint.
     disturbance : {"none", "random", "adversarial"}
@@ -266,7 +267,7 @@ class Scenario:
     seed: int = 1
     duration_s: float = 300.0
     tm: str = "optimal"
-    check: str = "union"
+    check: str | None = None
     switching: str = "early"
     disturbance: str = "random"
     net: NetSpec | None = None
@@ -286,7 +287,8 @@ class Scenario:
         _check_number(s, "seed", self.seed, lo=0, hi=2**31 - 1, integer=True)
         _check_number(s, "duration_s", self.duration_s, lo=0.0, lo_open=True)
         _check_choice(s, "tm", self.tm, TM_POLICIES)
-        _check_choice(s, "check", self.check, CHECKS)
+        if self.check is not None:
+            _check_choice(s, "check", self.check, CHECKS)
         _check_choice(s, "switching", self.switching, SWITCHING)
         _check_choice(s, "disturbance", self.disturbance, DISTURBANCES)
         _floats(self, "duration_s")

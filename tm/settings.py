@@ -5,12 +5,19 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Literal
 
-__all__ = ["TMSettings", "TMSettingsError", "POLICIES", "CHECKS"]
+__all__ = ["TMSettings", "TMSettingsError", "POLICIES", "CHECKS", "default_check"]
 
 #: Valid values of :attr:`TMSettings.policy`.
 POLICIES = ("greedy", "optimal")
 #: Valid values of :attr:`TMSettings.check`.
 CHECKS = ("union", "timed")
+
+
+def default_check(controller: str) -> str:
+    """The tube check a run uses when none is given: ``timed`` with the movement-authority controller
+    (its reach-tightened claims are compared step k against step k, design.md §7), ``union`` with the
+    paper's (condition (9); with its nested centred sets both checks decide alike)."""
+    return "timed" if controller == "authority" else "union"
 
 
 class TMSettingsError(ValueError):

@@ -101,6 +101,21 @@ def test_user_sumocfg_runs_with_default_options(grid_net, grid_routes, tmp_path)
     s = run_sumo(str(cfg), tmp_path / "out", _opts(duration=5.0))
     assert s["complete"], s.get("error")
     assert {k: s["options"][k] for k in SUMOCFG_DEFAULTS} == SUMOCFG_DEFAULTS
+    assert s["options"]["check"] == "union"  # the paper controller's check (tm.settings.default_check)
+
+
+def test_authority_runs_take_the_timed_check_unless_told(grid_net, grid_routes, tmp_path):
+    """--check left out: a movement-authority run compares its claims step by step (timed), on a
+    .sumocfg and on the built-in grid alike; --check union still wins when given."""
+    cfg = write_sumocfg(tmp_path / "mine.sumocfg", grid_net, [grid_routes])
+    s = run_sumo(str(cfg), tmp_path / "a", _opts(duration=3.0, controller="authority"))
+    assert s["complete"], s.get("error")
+    assert s["options"]["check"] == "timed"
+    s = run_sumo(str(cfg), tmp_path / "b", _opts(duration=3.0, controller="authority", check="union"))
+    assert s["options"]["check"] == "union"
+    s = run_sumo("grid", tmp_path / "c", _opts(duration=3.0, controller="authority"))
+    assert s["complete"], s.get("error")
+    assert s["options"]["check"] == "timed"
 
 
 def test_departures_put_the_whole_body_on_the_first_lane(grid_net):

@@ -44,7 +44,8 @@ def write(tmp_path, text, name="s.toml"):
 def test_builtin_grid_defaults():
     assert {"grid", "grid-large"} <= set(builtin_scenarios())
     s = load_scenario("grid")
-    assert (s.name, s.seed, s.duration_s, s.tm, s.check, s.switching) == ("grid", 1, 300.0, "optimal", "union",
+    # check None: the run takes the controller's (timed with authority, union with paper)
+    assert (s.name, s.seed, s.duration_s, s.tm, s.check, s.switching) == ("grid", 1, 300.0, "optimal", None,
                                                                           "early")
     assert (s.net.junctions, s.net.lanes, s.net.spacing_m) == (4, 2, 100.0)
     assert s.demand.vehicles == 150 and s.demand.duration_s == 300.0 and s.demand.seed == 1
