@@ -348,14 +348,14 @@ class JunctionGate:
                 if blocked and not (self.pass_blocked and
                                     not any(self.corridors_meet(key_q, lo_q, hi_q, *b) for b in blocked)):
                     continue
+                if blocked_intr[q]:  # a claim it cannot pass stands in its corridor: it waits for that
+                    continue         # one to move, not for the holders, and holds nobody back
                 meet = [h for h, c in holders.items() if self.corridors_meet(key_q, lo_q, hi_q, *c)]
                 follows = (blocked_exit[q] or meet) and self._follows(fleet, pos, int(wrow[P[q]]), z, meet)
                 if blocked_exit[q] and not follows:
                     continue
                 if meet and not follows:
                     blocked.append((key_q, lo_q, hi_q))
-                    continue
-                if blocked_intr[q]:
                     continue
                 if self._yields(fleet, int(wrow[P[q]]), z, wrow[P[zP == z]]):
                     continue

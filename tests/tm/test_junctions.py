@@ -115,6 +115,23 @@ def test_no_overtaking_of_a_blocked_waiter():
     assert gate.wait == {(0, "B"): 0, (0, "C"): 0}
 
 
+def test_a_waiter_stuck_behind_a_claim_in_the_guard_holds_nobody_back():
+    """B (north) crosses the holder A's corridor, but E stands in B's own path inside the guard
+    (no token: a queue at a red light on SUMO's ``tools/game/cross``, where the first waiter of
+    the red approach kept the token from the green streams for the whole run): B cannot go
+    whoever holds the token, so it does not end the round, and C (west, apart from A but
+    crossing B's path) gets a token.  Without E, B waits for A and C does not overtake it."""
+    E = ((1.6, -8.0), (1.6, 60.0))  # on B's lane, inside the guard, standing
+    gate = _gate()
+    assert Scene({"A": EAST}).withhold(gate, t=0) == {"A"}
+    scene = Scene({"A": EAST, "B": NORTH, "C": WEST, "E": E}, k={"A": 5}, idle="E")
+    assert scene.withhold(gate, t=1) == {"A", "C"}
+    assert _holders(gate) == {"A", "C"} and (0, "B") in gate.wait
+    gate = _gate()
+    assert Scene({"A": EAST}).withhold(gate, t=0) == {"A"}
+    assert Scene({"A": EAST, "B": NORTH, "C": WEST}, k={"A": 5}).withhold(gate, t=1) == {"A"}
+
+
 def test_tokens_go_in_order_of_waiting_not_of_id():
     """Z has waited since step 0 (blocked by A's token); A leaves, and at step 1 "B" (an earlier
     id) asks across Z's path: Z, waiting longer, gets the token, B waits."""
