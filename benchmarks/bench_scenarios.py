@@ -9,10 +9,10 @@ corridor, ramp, fkk_in, A10KW, bs3d, fokr_bs_demo) and ``tlsgrid``, a signalised
 generated into the runs directory by SUMO's own tools (:func:`sumo_nets.tls_grid.make_tls_grid`:
 ``netgenerate --grid --grid.number 4 --grid.length 150 --default.lanenumber 2 --tls.guess``,
 ``randomTrips.py -e 180 -p 2.0 --seed 3 --validate``, a plain .sumocfg), with no option but
-``--duration`` (default 180 s: the first 180 s of the configuration's window), once per driver,
+``--duration`` and ``--controller`` (default 180 s: the first 180 s of the configuration's window), once per driver,
 each in its own process (libsumo runs one simulation per process), and writes one row per
-scenario, driver and controller (``--controller``: muvsim's mode, default paper; ``both``: paper
-and authority rows; SUMO's drivers: ``-``): demand
+scenario, driver and controller (``--controller``: muvsim's mode, passed to every muvsim run;
+default ``both``: paper and authority rows; SUMO's drivers: ``-``): demand
 in the window, undrivable vehicles, arrivals, mean delay and travel time of the arrived, halts,
 collisions (SUMO's, geometric), invariant violations, the signals mode and red-light
 violations (muvsim's ``--signals``, default obey; ``sumo`` for SUMO's drivers), rtf and wall time, or the run's error.
@@ -58,8 +58,8 @@ def main(argv=None) -> pd.DataFrame:
     ap.add_argument("--quick", action="store_true", help="cross and square, 20 s (used by the tests)")
     ap.add_argument("--duration", type=float, default=None, help="simulated seconds (default 180; quick 20)")
     ap.add_argument("--only", nargs="+", default=None, metavar="NAME", help="only these scenarios")
-    ap.add_argument("--controller", choices=["paper", "authority", "both"], default="paper",
-                    help="muvsim's --controller (default paper, the run's default); both: paper and authority rows")
+    ap.add_argument("--controller", choices=["paper", "authority", "both"], default="both",
+                    help="muvsim's --controller (default both: paper and authority rows)")
     ap.add_argument("--out", default="benchmarks/results/scenarios.csv")
     ap.add_argument("--runs", default=None, help="keep the run directories here (default: a temporary one)")
     args = ap.parse_args(argv)
@@ -90,7 +90,7 @@ def main(argv=None) -> pd.DataFrame:
                        "--duration", f"{duration:g}", "--quiet", "--log", "none"]
                 if driver == "sumo":
                     cmd += ["--baseline", "sumo"]
-                elif controller != "paper":  # paper: no option at all, the run's default
+                else:
                     cmd += ["--controller", controller]
                 proc = subprocess.run(cmd, capture_output=True, text=True)
                 row = _row(name, driver, controller, duration, out, proc.returncode, proc.stderr)

@@ -111,6 +111,10 @@ def _cmd_run(args) -> int:
     if problem:
         print(f"muvsim run: {problem}", file=sys.stderr)
         return 2
+    if getattr(args, "controller", "paper") is None:
+        from bridge.scenarios import default_controller
+
+        args.controller = default_controller(args.scenario)
     if getattr(args, "vclass", "paper-a") is None:
         args.vclass = "car" if getattr(args, "controller", "paper") == "authority" else "paper-a"
     if args.scenario in FREE_PLANE:
@@ -300,10 +304,10 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--seed", type=int, default=None, help=SEED_HELP)
     r.add_argument("--vclass", default=None,
                    help="vehicle class for single/swap/crossing (default paper-a; car with --controller authority)")
-    r.add_argument("--controller", choices=["paper", "authority"], default="paper",
-                   help="paper (default): the paper's sets, cost and centred claims; authority: movement-authority "
-                        "sets and cost with reach-tightened claims (design.md §7; car, bus, truck; single: a 600 m "
-                        "straight)")
+    r.add_argument("--controller", choices=["paper", "authority"], default=None,
+                   help="authority (default for SUMO scenarios): movement-authority sets and cost with "
+                        "reach-tightened claims (design.md §7; car, bus, truck; single: a 600 m straight); "
+                        "paper (default for the free-plane scenarios): the paper's sets, cost and centred claims")
     r.add_argument("--tm", choices=["greedy", "optimal"], default=None, help="default: the scenario's")
     r.add_argument("--claim-cache", choices=["on", "off"], default="on",
                    help="authority mode: on (default): current claims reused between steps where sound "

@@ -15,9 +15,16 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-__all__ = ["ScenarioRunError", "run_scenario", "SCENARIOS"]
+__all__ = ["ScenarioRunError", "run_scenario", "SCENARIOS", "default_controller"]
 
 SCENARIOS = ("single", "paper10", "swap", "crossing")
+
+
+def default_controller(scenario: str) -> str:
+    """``muvsim run --controller``'s default for ``scenario``: ``authority`` (movement authority,
+    design.md §7) for SUMO scenarios (urban classes: car, bus, truck and SUMO's vTypes), ``paper``
+    for the free-plane ones (the paper's own classes and figures)."""
+    return "paper" if scenario in SCENARIOS else "authority"
 
 
 class ScenarioRunError(ValueError):

@@ -55,11 +55,11 @@ from typing import Iterable, Sequence
 
 import pandas as pd
 
-from bridge.scenarios import SCENARIOS
+from bridge.scenarios import SCENARIOS, default_controller
 from tm.settings import default_check
 
 __all__ = ["SweepSettingsError", "SweepSettings", "RunSpec", "ROW_COLUMNS", "SUMMARY_KPIS", "VEHICLE_STATS",
-           "COUNT_COLUMNS", "TABLE_COLUMNS", "OPTION_CHOICES", "CONTROLLER_DEFAULT", "plan", "run_plan", "sweep",
+           "COUNT_COLUMNS", "TABLE_COLUMNS", "OPTION_CHOICES", "plan", "run_plan", "sweep",
            "run_one", "format_table", "is_free_plane", "check_scheduler_address", "spec_from_summary",
            "runs_from_dirs"]
 
@@ -67,8 +67,6 @@ __all__ = ["SweepSettingsError", "SweepSettings", "RunSpec", "ROW_COLUMNS", "SUM
 FREE_PLANE = SCENARIOS
 #: What ``muvsim run`` uses for a free-plane scenario's options left out (see ``bridge/cli.py``).
 FREE_PLANE_DEFAULTS = {"tm": "optimal", "switching": "early", "disturbance": "random"}  # check: default_check
-#: ``muvsim run --controller``'s default (every scenario): the paper's sets, cost and centred claims.
-CONTROLLER_DEFAULT = "paper"
 #: Valid values of every option that a sweep can vary.
 OPTION_CHOICES = {
     "controller": ("paper", "authority"),
@@ -180,7 +178,8 @@ class RunSpec:
     driver : {"muvsim", "sumo"}
         ``"sumo"``: SUMO's own drivers (``--baseline sumo``; SUMO scenarios only).
     controller : {"paper", "authority"} or None
-        ``muvsim run --controller``; None: ``paper``.  Not for SUMO's own drivers (leave it None).
+        ``muvsim run --controller``; None: its default (:func:`bridge.scenarios.default_controller`:
+        ``authority`` for SUMO scenarios, ``paper`` for free-plane ones).  Not for SUMO's own drivers.
     tm, check, switching, disturbance : str or None
         Options; None takes the scenario's value.
     solver : {"exact", "daqp", "proxsuite"}
@@ -236,7 +235,7 @@ class RunSpec:
         if self.controller is not None:
             if self.controller not in OPTION_CHOICES["controller"]:
                 raise _fail("controller", f"must be one of {', '.join(OPTION_CHOICES['controller'])} (or None: "
-                                          f"{CONTROLLER_DEFAULT})", self.controller)
+                                          f"{default_controller(str(self.scenario))})", self.controller)
             if self.driver == "sumo":
                 raise _fail("controller", "SUMO's own drivers (driver 'sumo') use none of muvsim's options "
                                           "(leave it None)", self.controller)
@@ -275,7 +274,7 @@ class RunSpec:
         SUMO runs leave them None (``run_sumo`` takes the scenario's).
         """
         opts = argparse.Namespace(
-            scenario=self.scenario, seed=self.seed, controller=self.controller or CONTROLLER_DEFAULT, tm=self.tm,
+            scenario=self.scenario, seed=self.seed, controller=self.controller or default_controller(self.scenario), tm=self.tm,
             check=self.check, switching=self.switching, disturbance=self.disturbance, solver=self.solver,
             duration=self.duration_s,
             baseline="sumo" if self.driver == "sumo" else None, gui=False, quiet=True, log=self.log,
@@ -286,14 +285,14 @@ class RunSpec:
                 if getattr(opts, name) is None:
                     setattr(opts, name, default)
             if opts.check is None:
-                opts.check = default_check(opts.controller or CONTROLLER_DEFAULT)
+                opts.check = default_check(opts.controller)
         return opts
 
 
 def _nan_row(spec: RunSpec, run_dir: Path) -> dict:
     row = {c: math.nan for c in ROW_COLUMNS}
     row.update(label=spec.label, driver=spec.driver, seed=spec.seed,
-               controller=spec.controller or (CONTROLLER_DEFAULT if spec.driver == "muvsim" else None),
+               controller=spec.controller or (default_controller(spec.scenario) if spec.driver == "muvsim" else None),
                tm=spec.tm, check=spec.check,
                switching=spec.switching, disturbance=spec.disturbance, solver=spec.solver,
                signals=spec.signals, pedestrians=spec.pedestrians,
@@ -462,7 +461,7 @@ class SweepSettings:
         be a path the workers can write (a shared file system) and the scenario a path they can read.
     controller, tm, check, switching, disturbance, solver, signals, pedestrians : tuple of str
         Values of each option to sweep (see :data:`OPTION_CHOICES`); ``solver`` defaults to ``("exact",)``,
-        ``controller`` to ``("paper",)`` (``muvsim run --controller``'s default, every scenario).
+        ``controller`` to ``muvsim run --controller``'s default (:func:`bridge.scenarios.default_controller`).
         ``signals`` and ``pedestrians`` mean what ``muvsim run --signals / --pedestrians`` do (defaults
         ``obey`` and ``guard``); SUMO scenarios only (the baseline runs are SUMO's drivers either way).
     duration_s : float or None
@@ -577,7 +576,7 @@ class SweepSettings:
                         + ") or a path to a .toml or .sumocfg file", self.scenario)
         if is_free_plane(s):
             object.__setattr__(self, "scenario", s)
-            object.__setattr__(self, "_defaults", {"controller": CONTROLLER_DEFAULT, **FREE_PLANE_DEFAULTS})
+            object.__setattr__(self, "_defaults", {"controller": default_controller(s), **FREE_PLANE_DEFAULTS})
             return
         try:
             loaded = load_scenario(s)
@@ -589,7 +588,7 @@ class SweepSettings:
             s = str(Path(s).expanduser().absolute())  # workers may not share the client's working directory
         object.__setattr__(self, "scenario", s)
         # the scenario's own options (a .sumocfg: Scenario's defaults), used for options not swept
-        object.__setattr__(self, "_defaults", {"controller": CONTROLLER_DEFAULT,
+        object.__setattr__(self, "_defaults", {"controller": default_controller(s),
                                                **{n: getattr(loaded, n) for n in FREE_PLANE_DEFAULTS},
                                                **SUMO_ONLY_DEFAULTS})
 

@@ -12,15 +12,16 @@ SCRIPT = ROOT / "benchmarks" / "bench_scenarios.py"
 
 def test_scenarios_benchmark_quick_mode_writes_its_table(tmp_path):
     out = tmp_path / "scenarios.csv"
-    proc = subprocess.run([sys.executable, str(SCRIPT), "--quick", "--out", str(out), "--runs", str(tmp_path / "r")],
+    proc = subprocess.run([sys.executable, str(SCRIPT), "--quick", "--controller", "authority", "--out", str(out),
+                           "--runs", str(tmp_path / "r")],
                           capture_output=True, text=True, timeout=600, cwd=ROOT)
     assert proc.returncode == 0, proc.stderr[-2000:]
     df = pd.read_csv(out)
     assert sorted(zip(df["scenario"], df["driver"])) == [("cross", "muvsim"), ("cross", "sumo"),
                                                          ("square", "muvsim"), ("square", "sumo")]
     assert df["complete"].all() and (df["collisions_sumo"] == 0).all()
-    # the default is muvsim's default controller (paper); SUMO's drivers have none
-    assert set(zip(df["driver"], df["controller"])) == {("muvsim", "paper"), ("sumo", "-")}
+    # the controller asked for; SUMO's drivers have none
+    assert set(zip(df["driver"], df["controller"])) == {("muvsim", "authority"), ("sumo", "-")}
     m = df[df["driver"] == "muvsim"].set_index("scenario")
     assert (m["demand"] > 0).all() and (m["invariant_violations"] == 0).all()
     # lights obeyed by default, and the run's red-light counter recorded (cross is signalised)
@@ -29,8 +30,9 @@ def test_scenarios_benchmark_quick_mode_writes_its_table(tmp_path):
     assert (df.groupby("scenario")["demand"].nunique() == 1).all()
     # the figures are the runs' own
     import json
-    s = json.loads((tmp_path / "r" / "square-muvsim" / "summary.json").read_text())
+    s = json.loads((tmp_path / "r" / "square-muvsim-authority" / "summary.json").read_text())
     assert m.loc["square", "demand"] == s["vehicles_total"] and m.loc["square", "rtf"] == s["rtf"]
+    assert s["options"]["controller"] == "authority"
 
 
 def test_an_unknown_scenario_is_refused_by_name(tmp_path):

@@ -8,6 +8,7 @@ import pandas as pd
 import pytest
 
 from bridge.cli import main
+from bridge.scenarios import default_controller
 from bridge.sumo_world import run_sumo
 import bridge.sweep
 from bridge.sweep import (ROW_COLUMNS, RunSpec, SweepSettings, SweepSettingsError, format_table, plan, run_one,
@@ -51,7 +52,7 @@ def small_toml(tmp_path_factory):
 
 def _direct(scenario, out, seed, **kw):
     opts = dict(seed=seed, duration=20.0, tm=None, check=None, switching=None, disturbance=None, solver="exact",
-                baseline=None, gui=False, quiet=True, log="none")
+                baseline=None, gui=False, quiet=True, log="none", controller=default_controller(str(scenario)))
     opts.update(kw)
     return run_sumo(str(scenario), out, SimpleNamespace(**opts))
 
@@ -249,18 +250,20 @@ def test_printed_table_is_rounded_as_muvsim_run_prints_figures():
     assert lines[3] == "b: boom"
 
 
-def test_controller_is_a_run_option_paper_by_default(tmp_path):
-    """Every muvsim run names its controller (muvsim run's default, paper, when not swept) and hands it
-    to the run; swept controllers label the runs; SUMO's drivers have none; RunSpec refuses a bad one."""
+def test_controller_is_a_run_option_authority_by_default_for_sumo(tmp_path):
+    """Every muvsim run names its controller (muvsim run's default when not swept: authority for a SUMO
+    scenario, paper for a free-plane one) and hands it to the run; swept controllers label the runs;
+    SUMO's drivers have none; RunSpec refuses a bad one."""
     runs = plan(SweepSettings(scenario="grid", seeds=(1,), out=tmp_path, baseline=True))
-    assert [(r.label, r.controller) for r in runs] == [("seed1", "paper"), ("seed1_baseline-sumo", None)]
-    assert vars(runs[0].options())["controller"] == "paper"
+    assert [(r.label, r.controller) for r in runs] == [("seed1", "authority"), ("seed1_baseline-sumo", None)]
+    assert vars(runs[0].options())["controller"] == "authority"
     runs = plan(SweepSettings(scenario="grid", seeds=(1,), out=tmp_path, controller=["paper", "authority"],
                               check=["timed"]))
     assert [(r.label, r.controller, r.check) for r in runs] == [("seed1_controller-paper", "paper", "timed"),
                                                                 ("seed1_controller-authority", "authority", "timed")]
     assert vars(runs[1].options())["controller"] == "authority"
-    assert vars(RunSpec(label="a", scenario="grid", seed=1).options())["controller"] == "paper"
+    assert vars(RunSpec(label="a", scenario="grid", seed=1).options())["controller"] == "authority"
+    assert vars(RunSpec(label="a", scenario="single", seed=1).options())["controller"] == "paper"
     assert [r.controller for r in plan(SweepSettings(scenario="single", seeds=(1,), out=tmp_path))] == ["paper"]
     for kw in (dict(controller="mpc"), dict(driver="sumo", controller="paper")):
         with pytest.raises(SweepSettingsError, match="^controller: "):
