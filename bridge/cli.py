@@ -207,7 +207,8 @@ def _cmd_sweep(args) -> int:
         return 2
     try:
         settings = SweepSettings(
-            scenario=args.scenario, seeds=tuple(args.seeds), out=Path(args.out), tm=tuple(args.tm or ()),
+            scenario=args.scenario, seeds=tuple(args.seeds), out=Path(args.out),
+            controller=tuple(args.controller or ()), tm=tuple(args.tm or ()),
             check=tuple(args.check or ()), switching=tuple(args.switching or ()),
             disturbance=tuple(args.disturbance or ()), solver=tuple(args.solver or ()),
             signals=tuple(args.signals or ()), pedestrians=tuple(args.pedestrians or ()), duration_s=args.duration,
@@ -358,6 +359,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "per seed, so means over seeds are means over traffic (a .sumocfg's demand is fixed)")
     w.add_argument("--tm", choices=["greedy", "optimal"], nargs="+", default=None,
                    help="policies to sweep (default: the scenario's)")
+    w.add_argument("--controller", choices=["authority", "paper"], nargs="+", default=None,
+                   help="default: muvsim run's (authority for SUMO scenarios, paper for free-plane ones)")
     w.add_argument("--check", choices=["union", "timed"], nargs="+", default=None)
     w.add_argument("--switching", choices=["terminal", "early"], nargs="+", default=None)
     w.add_argument("--disturbance", choices=["random", "adversarial", "none"], nargs="+", default=None)
@@ -379,7 +382,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="worker processes of the local cluster (default: CPUs, at most one per run)")
     w.add_argument("--scheduler", default=None, metavar="ADDRESS",
                    help="use an existing Dask cluster, e.g. tcp://host:8786 (DIR must be shared with its workers)")
-    w.add_argument("--vclass", default="paper-a", help="vehicle class for single/swap/crossing")
+    w.add_argument("--vclass", default=None,
+                   help="vehicle class for single/swap/crossing (default paper-a; car with --controller authority)")
     w.add_argument("--vehicles", type=int, default=8, help="vehicles in swap/crossing")
     w.add_argument("--quiet", action="store_true", help="no progress line per finished run")
     w.set_defaults(func=_cmd_sweep)

@@ -193,8 +193,9 @@ class RunSpec:
         Simulated seconds; None takes the scenario's (free plane: until every vehicle is done).
     log : {"none", "summary", "full"}
         ``run.mcap`` of the run.
-    vclass : str
-        Vehicle class of ``single``, ``swap`` and ``crossing``.
+    vclass : str or None
+        Vehicle class of ``single``, ``swap`` and ``crossing``; None: ``muvsim run``'s (``car`` with the
+        authority controller, ``paper-a`` with the paper's).
     vehicles : int
         Vehicles of ``swap`` and ``crossing``.
     """
@@ -213,7 +214,7 @@ class RunSpec:
     pedestrians: str | None = None
     duration_s: float | None = None
     log: str = "none"
-    vclass: str = "paper-a"
+    vclass: str | None = None
     vehicles: int = 8
 
     def __post_init__(self) -> None:
@@ -257,8 +258,8 @@ class RunSpec:
         object.__setattr__(self, "duration_s", _check_duration("duration_s", self.duration_s))
         if self.log not in LOG_MODES:
             raise _fail("log", f"must be one of {', '.join(LOG_MODES)}", self.log)
-        if not isinstance(self.vclass, str) or not self.vclass:
-            raise _fail("vclass", "must be a vehicle class name", self.vclass)
+        if self.vclass is not None and (not isinstance(self.vclass, str) or not self.vclass):
+            raise _fail("vclass", "must be a vehicle class name (or None: the controller's)", self.vclass)
         if not _is_int(self.vehicles) or self.vehicles < 1:
             raise _fail("vehicles", "must be an integer >= 1", self.vehicles)
 
@@ -286,6 +287,8 @@ class RunSpec:
                     setattr(opts, name, default)
             if opts.check is None:
                 opts.check = default_check(opts.controller)
+            if opts.vclass is None:  # as muvsim run: the controller's class
+                opts.vclass = "car" if opts.controller == "authority" else "paper-a"
         return opts
 
 
@@ -475,8 +478,9 @@ class SweepSettings:
         with ``scheduler``.
     scheduler : str or None
         Address of an existing Dask scheduler (``tcp://host:8786``); None starts a local cluster.
-    vclass : str
-        Vehicle class of the free-plane ``single``, ``swap``, ``crossing``.
+    vclass : str or None
+        Vehicle class of the free-plane ``single``, ``swap``, ``crossing``; None: ``muvsim run``'s
+        (``car`` with the authority controller, ``paper-a`` with the paper's).
     vehicles : int
         Vehicles of ``swap`` and ``crossing``.
     fresh_process : bool
@@ -505,7 +509,7 @@ class SweepSettings:
     log: str = "none"
     workers: int | None = None
     scheduler: str | None = None
-    vclass: str = "paper-a"
+    vclass: str | None = None
     vehicles: int = 8
     fresh_process: bool = False
     _defaults: dict = field(default_factory=dict, init=False, repr=False, compare=False)
@@ -558,8 +562,8 @@ class SweepSettings:
             if self.workers is not None:
                 raise _fail("workers", "sets the size of the local cluster; an existing cluster (scheduler) has "
                                        "its own workers: give one of workers or scheduler", self.workers)
-        if not isinstance(self.vclass, str) or not self.vclass:
-            raise _fail("vclass", "must be a vehicle class name", self.vclass)
+        if self.vclass is not None and (not isinstance(self.vclass, str) or not self.vclass):
+            raise _fail("vclass", "must be a vehicle class name (or None: the controller's)", self.vclass)
         if not _is_int(self.vehicles) or self.vehicles < 1:
             raise _fail("vehicles", "must be an integer >= 1", self.vehicles)
         if not isinstance(self.fresh_process, bool):

@@ -111,6 +111,21 @@ def test_failed_runs_are_rows_and_the_others_complete(small_toml, tmp_path):
     assert len(pd.read_csv(tmp_path / "out" / "sweep.csv")) == 4
 
 
+def test_cli_sweep_over_controllers_takes_each_ones_class_and_check(tmp_path, capsys):
+    """`muvsim sweep single --controller paper authority`: one run per controller, each with muvsim run's
+    class and check for it (paper-a and union; car and timed), both complete."""
+    out = tmp_path / "sc"
+    rc = main(["sweep", "single", "--out", str(out), "--seeds", "0", "--controller", "paper", "authority",
+               "--duration", "5", "--workers", "1", "--quiet"])
+    assert rc == 0, capsys.readouterr().out
+    df = pd.read_csv(out / "sweep.csv").set_index("label")
+    assert df["complete"].all(), df["error"].tolist()
+    assert dict(df["controller"]) == {"seed0_controller-paper": "paper", "seed0_controller-authority": "authority"}
+    assert dict(df["check"]) == {"seed0_controller-paper": "union", "seed0_controller-authority": "timed"}
+    got = {label: json.loads((out / label / "summary.json").read_text())["options"]["vclass"] for label in df.index}
+    assert got == {"seed0_controller-paper": "paper-a", "seed0_controller-authority": "car"}
+
+
 def test_cli_sweep_free_plane_over_seeds_and_options(tmp_path, capsys):
     """`muvsim sweep single` runs seeds x solvers (no SUMO), prints the table and writes sweep.csv."""
     out = tmp_path / "sw"
