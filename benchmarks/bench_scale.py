@@ -311,14 +311,17 @@ class TimedSumoAdapter(SumoAdapter):
             self._move = self._insert = 0.0
 
 
-def run_options(driver: str, duration_s: float, log: str) -> SimpleNamespace:
-    """The options namespace ``muvsim run`` builds, for a SUMO scenario with its own settings."""
+def run_options(driver: str, duration_s: float, log: str, controller: str = "paper") -> SimpleNamespace:
+    """The options namespace ``muvsim run --controller CONTROLLER`` builds, for a SUMO scenario with its
+    own settings."""
     return SimpleNamespace(seed=None, vclass="paper-a", tm=None, check=None, switching=None, disturbance=None,
                            baseline="sumo" if driver == "sumo" else None, gui=False, quiet=True,
-                           solver="exact", duration=duration_s, vehicles=8, log=log, plots=False)
+                           solver="exact", duration=duration_s, vehicles=8, log=log, plots=False,
+                           controller=controller)
 
 
-def run_one(driver: str, scenario: Path, run_dir: Path, duration_s: float, log: str) -> dict:
+def run_one(driver: str, scenario: Path, run_dir: Path, duration_s: float, log: str,
+            controller: str = "paper") -> dict:
     """One run in this process (the child): ``run_sumo`` plus its SUMO call timings and peak memory.
 
     Writes ``run_dir/scale_steps.csv`` (muvsim only: per step ``wall_ms`` since the previous
@@ -335,7 +338,7 @@ def run_one(driver: str, scenario: Path, run_dir: Path, duration_s: float, log: 
         return made[-1]
 
     with mock.patch.object(sumo_world, "SumoAdapter", factory):
-        summary = sumo_world.run_sumo(str(scenario), run_dir, run_options(driver, duration_s, log))
+        summary = sumo_world.run_sumo(str(scenario), run_dir, run_options(driver, duration_s, log, controller))
     if driver == "muvsim" and made:
         a = made[0]
         end = np.asarray(a.step_end)
@@ -358,22 +361,24 @@ def child_main(argv: list[str]) -> int:
     ap.add_argument("--run-dir", required=True)
     ap.add_argument("--duration", type=float, required=True)
     ap.add_argument("--log", choices=["none", "summary", "full"], default="none")
+    ap.add_argument("--controller", choices=["paper", "authority"], default="paper")
     a = ap.parse_args(argv)
-    res = run_one(a.driver, Path(a.scenario), Path(a.run_dir), a.duration, a.log)
+    res = run_one(a.driver, Path(a.scenario), Path(a.run_dir), a.duration, a.log, a.controller)
     return 0 if res["summary"].get("complete") else 1
 
 
 # --------------------------------------------------------------------------- parent
 
 def run_child(driver: str, scenario: Path, run_dir: Path, duration_s: float, log: str,
-              timeout: float | None) -> dict:
+              timeout: float | None, controller: str = "paper") -> dict:
     """Run one driver in a fresh Python process; returns its result (``error`` set when it failed)."""
     run_dir.mkdir(parents=True, exist_ok=True)
     link = run_dir / "inputs"
     if not link.exists():
         link.symlink_to(scenario.parent / "inputs", target_is_directory=True)
     cmd = [sys.executable, str(Path(__file__).resolve()), "--child", "--driver", driver, "--scenario",
-           str(scenario), "--run-dir", str(run_dir), "--duration", repr(duration_s), "--log", log]
+           str(scenario), "--run-dir", str(run_dir), "--duration", repr(duration_s), "--log", log,
+           "--controller", controller]
     t = time.perf_counter()
     try:
         proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, cwd=ROOT)
@@ -455,16 +460,18 @@ def window_figures(steps: pd.DataFrame, timed: pd.DataFrame, warmup_s: float, Ts
     return out
 
 
-def measure(case: ScaleCase, work: Path, log: str, timeout: float | None, machine: dict) -> dict:
-    """Both runs of one case and its row of the table."""
+def measure(case: ScaleCase, work: Path, log: str, timeout: float | None, machine: dict,
+            controller: str = "paper") -> dict:
+    """Both runs of one case and its row of the table (muvsim with ``controller``)."""
     row: dict = {"target": case.target, "junctions": case.junctions, "demand_requested": case.vehicles,
-                 "warmup_s": case.warmup_s, "window_s": case.window_s, "seed": case.seed, "log": log}
+                 "warmup_s": case.warmup_s, "window_s": case.window_s, "seed": case.seed, "log": log,
+                 "controller": controller}
     row["load_before"] = round(os.getloadavg()[0], 2)
     t = time.perf_counter()
     scenario = prepare(case, work)
     row["generate_s"] = round(time.perf_counter() - t, 3)
     errors = []
-    muv = run_child("muvsim", scenario, work / "muvsim", case.duration_s, log, timeout)
+    muv = run_child("muvsim", scenario, work / "muvsim", case.duration_s, log, timeout, controller)
     if "error" not in muv:
         s = muv["summary"]
         try:
@@ -528,6 +535,8 @@ def main(argv: list[str] | None = None) -> pd.DataFrame:
     ap.add_argument("--runs", default=None, help="keep the run directories here (default: a temporary directory)")
     ap.add_argument("--timeout", type=float, default=None, help="wall seconds per run before it is abandoned")
     ap.add_argument("--quick", action="store_true", help="30 vehicles on a 3x3 grid, 20 simulated s, no warm-up")
+    ap.add_argument("--controller", choices=["paper", "authority"], default="paper",
+                    help="muvsim's --controller (default paper: the figures of benchmarks/results/scale.csv)")
     ap.add_argument("--out", default="benchmarks/results/scale.csv")
     args = ap.parse_args(raw)
     sizes, window, warmup = args.sizes, args.sim_seconds, args.warmup
@@ -547,7 +556,7 @@ def main(argv: list[str] | None = None) -> pd.DataFrame:
         for case in cases:
             print(f"size {case.target}: {case.junctions}x{case.junctions} grid, {case.vehicles} trips, "
                   f"{case.duration_s:g} simulated s ...", flush=True)
-            row = measure(case, (base / case.name).resolve(), args.log, args.timeout, machine)
+            row = measure(case, (base / case.name).resolve(), args.log, args.timeout, machine, args.controller)
             if row["error"]:
                 print(f"  failed: {row['error']}", flush=True)
             rows.append(row)

@@ -29,16 +29,21 @@ def _bench():
     return mod
 
 
-def test_scale_benchmark_quick_mode_writes_its_table(tmp_path):
+@pytest.mark.parametrize("controller", ["paper", "authority"])
+def test_scale_benchmark_quick_mode_writes_its_table(tmp_path, controller):
     out = tmp_path / "result.csv"
-    proc = subprocess.run([sys.executable, str(SCRIPT), "--quick", "--out", str(out), "--runs", str(tmp_path / "runs")],
-                          capture_output=True, text=True, timeout=600, cwd=ROOT)
+    proc = subprocess.run([sys.executable, str(SCRIPT), "--quick", "--controller", controller, "--out", str(out),
+                           "--runs", str(tmp_path / "runs")], capture_output=True, text=True, timeout=600, cwd=ROOT)
     assert proc.returncode == 0, proc.stderr[-2000:] + proc.stdout[-2000:]
     df = pd.read_csv(out)
     assert COLUMNS <= set(df.columns)
     assert len(df) == 1
     r = df.iloc[0]
     assert r["complete"] and (r["target"], r["junctions"]) == (30, 3)
+    # the muvsim run was driven by the controller asked for, and the row says which
+    import json
+    (summary,) = (tmp_path / "runs").glob("*/muvsim/summary.json")
+    assert r["controller"] == controller == json.loads(summary.read_text())["options"]["controller"]
     assert 0 < r["active_mean"] <= r["active_max"] <= r["demand"]
     assert r["simulated_s"] == r["sumo_simulated_s"] == 20.0
     # the components, other included, add up to the measured total; all but "other" are >= 0
