@@ -96,7 +96,7 @@ def scenario_problem(name: str) -> str | None:
 
 
 def _cmd_run(args) -> int:
-    from bridge.scenarios import ScenarioRunError, run_scenario
+    from bridge.scenarios import ScenarioRunError, default_controller, default_vclass, run_scenario
 
     problem = scenario_problem(args.scenario)
     if problem:
@@ -112,11 +112,9 @@ def _cmd_run(args) -> int:
         print(f"muvsim run: {problem}", file=sys.stderr)
         return 2
     if getattr(args, "controller", "paper") is None:
-        from bridge.scenarios import default_controller
-
         args.controller = default_controller(args.scenario)
     if getattr(args, "vclass", "paper-a") is None:
-        args.vclass = "car" if getattr(args, "controller", "paper") == "authority" else "paper-a"
+        args.vclass = default_vclass(getattr(args, "controller", "paper"))
     if args.scenario in FREE_PLANE:
         from tm.settings import default_check
 

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-__all__ = ["ScenarioRunError", "run_scenario", "SCENARIOS", "default_controller"]
+__all__ = ["ScenarioRunError", "run_scenario", "SCENARIOS", "default_controller", "default_vclass"]
 
 SCENARIOS = ("single", "paper10", "swap", "crossing")
 
@@ -25,6 +25,12 @@ def default_controller(scenario: str) -> str:
     design.md §7) for SUMO scenarios (urban classes: car, bus, truck and SUMO's vTypes), ``paper``
     for the free-plane ones (the paper's own classes and figures)."""
     return "paper" if scenario in SCENARIOS else "authority"
+
+
+def default_vclass(controller: str) -> str:
+    """``--vclass``'s default for the free-plane scenarios: ``car`` with the movement-authority
+    controller (it needs a class with a ``comfort_decel``), the paper's ``paper-a`` otherwise."""
+    return "car" if controller == "authority" else "paper-a"
 
 
 class ScenarioRunError(ValueError):

@@ -55,7 +55,7 @@ from typing import Iterable, Sequence
 
 import pandas as pd
 
-from bridge.scenarios import SCENARIOS, default_controller
+from bridge.scenarios import SCENARIOS, default_controller, default_vclass
 from tm.settings import default_check
 
 __all__ = ["SweepSettingsError", "SweepSettings", "RunSpec", "ROW_COLUMNS", "SUMMARY_KPIS", "VEHICLE_STATS",
@@ -275,8 +275,8 @@ class RunSpec:
         SUMO runs leave them None (``run_sumo`` takes the scenario's).
         """
         opts = argparse.Namespace(
-            scenario=self.scenario, seed=self.seed, controller=self.controller or default_controller(self.scenario), tm=self.tm,
-            check=self.check, switching=self.switching, disturbance=self.disturbance, solver=self.solver,
+            scenario=self.scenario, seed=self.seed, controller=self.controller or default_controller(self.scenario),
+            tm=self.tm, check=self.check, switching=self.switching, disturbance=self.disturbance, solver=self.solver,
             duration=self.duration_s,
             baseline="sumo" if self.driver == "sumo" else None, gui=False, quiet=True, log=self.log,
             plots=False, vclass=self.vclass, vehicles=self.vehicles, signals=self.signals,
@@ -288,7 +288,7 @@ class RunSpec:
             if opts.check is None:
                 opts.check = default_check(opts.controller)
             if opts.vclass is None:  # as muvsim run: the controller's class
-                opts.vclass = "car" if opts.controller == "authority" else "paper-a"
+                opts.vclass = default_vclass(opts.controller)
         return opts
 
 
