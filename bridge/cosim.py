@@ -241,8 +241,11 @@ class Cosim:
         #: path-frame plants (settings.frame): the routes' frames and the fleet's stack
         self.paths = PathFleet() if settings.path_frame else None
         if self.paths is not None:
+            # SUMO's bodies lean off the route on lane changes (world.body_leans; authority mode,
+            # whose claims cover the world's bodies)
+            leans = getattr(self.world, "body_leans", None) if settings.controller == "authority" else None
             for s_ in specs:  # every route must make a frame (a clear error now, not at admission)
-                self.paths.frame(s_.id, s_.waypoints)
+                self.paths.frame(s_.id, s_.waypoints, leans(s_) if leans is not None else None)
         cs = ControllerSettings(solver=settings.solver, switching=settings.switching,
                                 mode="authority" if self.authority else "paper")
         if self.authority:
@@ -568,7 +571,11 @@ class Cosim:
                 T = self.reach.models[sp.vclass].tables
                 lo = (float(T.p_lo[T.N]), float(T.y_lo[T.N]))
                 hi = (self._ahead(sp.vclass), float(T.y_hi[T.N]))
-                pads = fn(sp, lo, hi, "path") if self.paths is not None else fn(sp, lo, hi)
+                if self.paths is not None:
+                    hb = self.paths.body_headings(sp.id, sp.waypoints, self._route_speeds(sp).arc)
+                    pads = fn(sp, lo, hi, "path", hb)
+                else:
+                    pads = fn(sp, lo, hi)
             if pads is None:
                 pads = np.zeros(4)
             self._pads[sp.id] = pads

@@ -31,12 +31,13 @@ class PathFleet:
         self._stack = PathStack([])
         self._offset: dict[int, int] = {}
 
-    def frame(self, vid: str, W) -> PathFrame:
-        """The path frame of vehicle ``vid``'s route ``W`` (built once)."""
+    def frame(self, vid: str, W, lean=None) -> PathFrame:
+        """The path frame of vehicle ``vid``'s route ``W`` (built once; ``lean``: its chords' body
+        leans, :class:`~controllers.path.PathFrame`)."""
         f = self._frames.get(vid)
         if f is None:
             try:
-                f = self._frames[vid] = PathFrame(W)
+                f = self._frames[vid] = PathFrame(W, lean)
             except PathError as exc:
                 raise ValueError(f"vehicle {vid}: its route cannot be driven in the path frame: {exc}") from None
         return f
@@ -50,6 +51,19 @@ class PathFleet:
             S, _ = f.to_path(np.asarray(W, dtype=float), np.asarray(arc, dtype=float), window=1.0)
             S = self._S[vid] = np.maximum.accumulate(S)  # a route's arc never runs back
         return np.column_stack([S, np.zeros(len(S))])
+
+    def body_headings(self, vid: str, W, arc) -> np.ndarray:
+        """Body heading (K,) on the chord arriving at each of the route's waypoints ``W`` (the first:
+        the first chord's), as :func:`bridge.groups._headings` gives the chords' own headings plus
+        the lean of the frame's segment holding the chord's middle (:meth:`frame` first)."""
+        f = self._frames[vid]
+        W = np.asarray(W, dtype=float)
+        d = np.diff(W, axis=0)
+        h = np.arctan2(d[:, 1], d[:, 0]) if len(d) else np.zeros(0)
+        S = self.waypoints(vid, W, arc)[:, 0]
+        lean = f.lean[f.segment(0.5 * (S[:-1] + S[1:]))] if len(d) else np.zeros(0)
+        hb = h + lean
+        return np.concatenate([hb[:1] if len(hb) else [0.0], hb])
 
     def forget(self, vid: str) -> None:
         self._frames.pop(vid, None)

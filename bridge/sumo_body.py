@@ -39,7 +39,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["RouteBody", "PadTable", "SAMPLE_M", "AHEAD_M", "BACK_M", "OFFSET_MAX_M"]
+__all__ = ["RouteBody", "PadTable", "SAMPLE_M", "AHEAD_M", "BACK_M", "OFFSET_MAX_M", "LEAN_MAX_RAD"]
 
 #: Arc spacing of the positions :meth:`RouteBody.pads` evaluates (m); the change of the body
 #: between neighbouring samples is added to the pads, so a coarser grid only costs room.
@@ -60,6 +60,11 @@ OFFSET_MAX_M = 1.5
 #: reached) for the padding to hold (m); counted otherwise (``body_window_exits``).
 BACK_M = 0.5
 
+
+#: Largest body lean (rad) :meth:`RouteBody.leans` gives a chord off the lanes: a lane change
+#: crosses a 3.2 m lane in 30 m (6 degrees; bridge.waypoints.LANE_CHANGE_M), or in half a short
+#: edge; a steeper join is a gap in the network's geometry, left without a lean.
+LEAN_MAX_RAD = float(np.deg2rad(30.0))
 
 #: SUMO's POSITION_EPS (m): the least shape length MSLane's length-geometry factor takes.
 _POSITION_EPS = 0.1
@@ -124,6 +129,9 @@ class RouteBody:
         self.length, self.width = float(length), float(width)
         self.poly = np.asarray(route.polyline, dtype=float)
         self.parc = _arc(self.poly)
+        #: whether each polyline segment lies on a lane's centre line (False: a lane change's
+        #: diagonal, or a join across a gap in the network's geometry)
+        self.seg_on = np.asarray(route.segment_on_lane, dtype=bool)
         # the route's lanes in order, each once; a polyline segment's lane is one of them
         order: list[str] = []
         for lane in route.segment_lanes:
@@ -216,6 +224,32 @@ class RouteBody:
         side = 0.5 * self.width * np.column_stack([-u[:, 1], u[:, 0]])
         corners = np.stack([front - side, front + side, back + side, back - side], axis=1)  # CCW, as tm.geometry
         return front, back, lane, corners
+
+    def leans(self, W) -> np.ndarray:
+        """Body lean (rad) of each chord ``W[j] -> W[j + 1]`` of the route's waypoints ``W`` (P, 2),
+        for :class:`controllers.path.PathFrame`: where the chord's middle lies on a polyline segment
+        off the lanes (a lane change's diagonal), the angle from the chord to SUMO's body there
+        (front minus back at offset 0: the lane's direction); 0 elsewhere, and where that angle
+        exceeds :data:`LEAN_MAX_RAD` (a gap join, not a lane change)."""
+        W = np.asarray(W, dtype=float)
+        out = np.zeros(max(len(W) - 1, 0))
+        if len(W) < 2 or self.seg_on.all():
+            return out
+        d = np.diff(W, axis=0)
+        mid = W[:-1] + 0.5 * d
+        sig = np.empty(len(mid))
+        s = None
+        for j in range(len(mid)):  # in order: a route may pass near itself
+            sig[j] = float(self.project(mid[j:j + 1], None if s is None else [s], 1.0, 10.0)[0][0])
+            s = sig[j]
+        seg = np.clip(np.searchsorted(self.parc, sig, side="right") - 1, 0, len(self.seg_on) - 1)
+        off = np.flatnonzero(~self.seg_on[seg] & (np.hypot(d[:, 0], d[:, 1]) > 0))
+        if len(off):
+            front, back, _, _ = self.bodies(sig[off], np.zeros(len(off)))
+            axis = front - back
+            lean = np.angle(np.exp(1j * (np.arctan2(axis[:, 1], axis[:, 0]) - np.arctan2(d[off, 1], d[off, 0]))))
+            out[off] = np.where(np.abs(lean) <= LEAN_MAX_RAD, lean, 0.0)
+        return out
 
     def pad_table(self, arc_k, W, H, box_lo, box_hi, frame: str = "road") -> "PadTable":
         """The :class:`PadTable` of this route for waypoints ``W`` (arcs ``arc_k``, headings ``H``)."""

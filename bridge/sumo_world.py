@@ -107,10 +107,21 @@ class SumoWorld:
             b = self._body[vid] = RouteBody(self.routes[vid], self.net, pv.length, pv.width)
         return b
 
-    def register_pads(self, spec: VehicleSpec, box_lo, box_hi, frame: str = "road") -> np.ndarray | None:
+    def body_leans(self, spec: VehicleSpec) -> np.ndarray | None:
+        """Body lean (rad) of each chord of ``spec``'s waypoints (:meth:`bridge.sumo_body.RouteBody.leans`:
+        SUMO's body on a lane change lies along the lane, not the diagonal); None without the
+        network's geometry."""
+        if self.net is None:
+            return None
+        return self.route_body(spec.id).leans(spec.waypoints)
+
+    def register_pads(self, spec: VehicleSpec, box_lo, box_hi, frame: str = "road",
+                      headings=None) -> np.ndarray | None:
         """Prepare the claims' padding of ``spec`` (:class:`bridge.sumo_body.PadTable`, ``frame`` its
         plant's) for positions in ``[box_lo, box_hi]`` of each waypoint's frame; returns the padding
-        (4,) of a vehicle at rest on its first waypoint (None without the network's geometry)."""
+        (4,) of a vehicle at rest on its first waypoint (None without the network's geometry).
+        ``headings`` (K,): the bodies' headings on the chord arriving at each waypoint (a leaning
+        path frame's, :class:`controllers.path.PathFrame`); the chords' own by default."""
         if self.net is None:
             return None
         t = self._pads.get(spec.id)
@@ -122,7 +133,8 @@ class SumoWorld:
             for k in range(len(W)):  # in order: a route may pass near itself
                 arc[k] = float(b.project(W[k:k + 1], None if s is None else [s], 1.0, 10.0)[0][0])
                 s = arc[k]
-            t = self._pads[spec.id] = b.pad_table(arc, W, spec_headings(W), box_lo, box_hi, frame)
+            H = spec_headings(W) if headings is None else np.asarray(headings, dtype=float)
+            t = self._pads[spec.id] = b.pad_table(arc, W, H, box_lo, box_hi, frame)
             self.pads_version += 1
         return t.pads(0, t.arc_k[0] - BACK_M)
 

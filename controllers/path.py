@@ -21,7 +21,18 @@ The map
     to the first segment and ``s >= S_end`` to the last, both extended as straight lines beyond
     the route's ends.  Then
 
-        to_world(s, n) = V_i + (s - S_i) T_i + n N_i,    body heading = theta_i.
+        to_world(s, n) = V_i + (s - S_i) T_i + n N_i,    body heading = theta_i + lean_i.
+
+Body lean
+    A body need not lie along its segment: on a lane change SUMO keeps a vehicle's body parallel to
+    the lane while muvsim's route crosses it on a diagonal (:mod:`bridge.sumo_body`).  A frame may
+    be given a ``lean`` per input chord, the angle from the chord to the body (0 by default); each
+    segment's body heading is ``theta_i + lean_i`` and a vertex where the lean changes is never
+    merged away.  The claim cover (:mod:`tm.path_cover`) lays each segment's box along the body's
+    heading, and the body padding (:class:`bridge.sumo_body.PadTable`) is measured from a
+    rectangle with that heading, so any lean is sound; the body's own is the tightest (a truck on
+    a 30 m lane change: a box along the diagonal held the lane-parallel body with 0.7 m to spare
+    across, into the oncoming lane).
 
 Kinks (the decision)
     The heading is piecewise constant: no smoothing, so a footprint is always a rectangle aligned
@@ -50,7 +61,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from controllers.tolerances import PATH_COLLINEAR_TOL_M, PATH_DUP_TOL_M
+from controllers.tolerances import PATH_COLLINEAR_TOL_M, PATH_DUP_TOL_M, PATH_LEAN_TOL_RAD
 
 __all__ = ["PathFrame", "PathStack", "PathError", "DEFAULT_PROJECTION_WINDOW_M"]
 
@@ -63,17 +74,18 @@ class PathError(ValueError):
     """A polyline that cannot make a path frame, or path coordinates that are not numbers."""
 
 
-def _merge_collinear(P: np.ndarray, tol: float) -> np.ndarray:
+def _merge_collinear(P: np.ndarray, tol: float, fixed: np.ndarray | None = None) -> np.ndarray:
     """Indices of the vertices of ``P`` (distinct consecutive points) kept after merging collinear
     runs: a run ``a .. e`` becomes one segment when every point between lies within ``tol`` of the
-    chord ``P[a] -> P[e]`` and projects inside it, in increasing order."""
+    chord ``P[a] -> P[e]`` and projects inside it, in increasing order.  ``fixed`` (P,) bool: vertices
+    kept whatever their neighbours."""
     keep = [0]
     a, n = 0, len(P)
     j = 1  # candidate vertex to drop: the chord a -> j + 1 must carry a + 1 .. j
     while j < n - 1:
         d = P[j + 1] - P[a]
         L = float(np.hypot(d[0], d[1]))
-        ok = L > tol  # a route back onto its anchor is a reversal
+        ok = L > tol and (fixed is None or not fixed[j])  # a route back onto its anchor is a reversal
         if ok:
             mid = P[a + 1:j + 1] - P[a]
             t = mid @ d / L
@@ -94,6 +106,10 @@ class PathFrame:
     ----------
     W : array_like, shape (P, 2)
         The route polyline: consecutive waypoints (world, m).
+    lean : array_like, shape (P - 1,), optional
+        Angle (rad, counter-clockwise) from each chord ``W[j] -> W[j + 1]`` to the body of a vehicle
+        on it (module notes, "Body lean"); 0 by default.  A merged segment takes the lean of its
+        first chord (its chords' leans agree within ``PATH_LEAN_TOL_RAD``).
 
     Attributes
     ----------
@@ -107,16 +123,19 @@ class PathFrame:
         Unit tangent and left normal of each segment.
     turn : ndarray, shape (M - 1,)
         Signed turn at each interior vertex (rad, in (-pi, pi], left positive).
+    lean, body_heading : ndarray, shape (M,)
+        Each segment's body lean and its body heading ``heading + lean``.
 
     Raises
     ------
     PathError
-        ``W`` not (P, 2), not finite, or fewer than two distinct points.
+        ``W`` not (P, 2), not finite, or fewer than two distinct points; ``lean`` not (P - 1,),
+        not finite, or not within 90 degrees.
     """
 
-    __slots__ = ("vertices", "arc", "heading", "tangent", "normal", "turn", "_inner")
+    __slots__ = ("vertices", "arc", "heading", "tangent", "normal", "turn", "lean", "body_heading", "_inner")
 
-    def __init__(self, W):
+    def __init__(self, W, lean=None):
         P = np.asarray(W, dtype=float)
         if P.ndim != 2 or P.shape[1] != 2:
             raise PathError(f"path polyline: must be (P, 2), got shape {P.shape}")
@@ -124,20 +143,37 @@ class PathFrame:
         if bad.any():
             raise PathError(f"path polyline: point {int(np.flatnonzero(bad)[0])} is not finite: "
                             f"{P[np.flatnonzero(bad)[0]].tolist()}")
+        if lean is None:
+            chord_lean = np.zeros(max(len(P) - 1, 0))
+        else:
+            chord_lean = np.asarray(lean, dtype=float)
+            if chord_lean.shape != (max(len(P) - 1, 0),):
+                raise PathError(f"path lean: must be one per chord, ({max(len(P) - 1, 0)},), got shape "
+                                f"{chord_lean.shape}")
+            if not (np.isfinite(chord_lean).all() and (np.abs(chord_lean) < 0.5 * np.pi).all()):
+                raise PathError("path lean: every lean must be finite and within 90 degrees of its chord")
         if len(P):
             step = np.hypot(*np.diff(P, axis=0).T) if len(P) > 1 else np.zeros(0)
-            P = P[np.concatenate([[True], step > PATH_DUP_TOL_M])]
+            kept = np.concatenate([[True], step > PATH_DUP_TOL_M])
+            # a chord of the kept points takes the lean of the last input chord it ends with
+            chord_lean = chord_lean[np.flatnonzero(kept)[1:] - 1] if len(P) > 1 else chord_lean
+            P = P[kept]
         if len(P) < 2:
             raise PathError("path polyline: needs at least two distinct points "
                             f"(farther apart than {PATH_DUP_TOL_M} m)")
-        P = P[_merge_collinear(P, PATH_COLLINEAR_TOL_M)]
+        fixed = np.zeros(len(P), dtype=bool)  # vertices where the lean changes
+        fixed[1:-1] = np.abs(np.diff(chord_lean)) > PATH_LEAN_TOL_RAD
+        keep = _merge_collinear(P, PATH_COLLINEAR_TOL_M, fixed if fixed.any() else None)
+        seg_lean = chord_lean[keep[:-1]]
+        P = P[keep]
         d = np.diff(P, axis=0)
         seg = np.hypot(d[:, 0], d[:, 1])
         T = d / seg[:, None]
         h = np.arctan2(T[:, 1], T[:, 0])
         turn = np.arctan2(T[:-1, 0] * T[1:, 1] - T[:-1, 1] * T[1:, 0], np.einsum("ij,ij->i", T[:-1], T[1:]))
         arrays = dict(vertices=P, arc=np.concatenate([[0.0], np.cumsum(seg)]), heading=h, tangent=T,
-                      normal=np.column_stack([-T[:, 1], T[:, 0]]), turn=turn)
+                      normal=np.column_stack([-T[:, 1], T[:, 0]]), turn=turn, lean=seg_lean,
+                      body_heading=h + seg_lean)
         for k, a in arrays.items():
             a = np.ascontiguousarray(a)
             a.flags.writeable = False
@@ -183,7 +219,7 @@ class PathFrame:
         -------
         xy : ndarray, shape (*shape, 2)
         heading : ndarray, shape
-            The heading of the segment ``s`` lies on (:meth:`segment`).
+            The body heading of the segment ``s`` lies on (:meth:`segment`): its heading plus its lean.
 
         Raises
         ------
@@ -196,7 +232,7 @@ class PathFrame:
         i = self.segment(s)
         a = s - self.arc[i]
         xy = self.vertices[i] + a[..., None] * self.tangent[i] + n[..., None] * self.normal[i]
-        return xy, self.heading[i]
+        return xy, self.body_heading[i]
 
     def to_path(self, xy, s_hint, window: float = DEFAULT_PROJECTION_WINDOW_M) -> tuple[np.ndarray, np.ndarray]:
         """Path coordinates ``(s, n)`` of world points ``xy`` (m, 2): the projection onto the
@@ -262,8 +298,8 @@ class PathStack:
     frames : sequence of PathFrame
     """
 
-    __slots__ = ("n_frames", "vertices", "heading", "tangent", "normal", "start", "end", "first", "last",
-                 "offset", "_start_g", "_end_g")
+    __slots__ = ("n_frames", "vertices", "heading", "body_heading", "tangent", "normal", "start", "end", "first",
+                 "last", "offset", "_start_g", "_end_g")
 
     #: Gap (m) between consecutive frames' shifted arcs (keeps the shifted starts strictly increasing).
     GAP_M = 1.0
@@ -281,6 +317,7 @@ class PathStack:
             n_frames=len(frames),
             vertices=cat([f.vertices[:-1] for f in frames], (0, 2)),
             heading=cat([f.heading for f in frames], (0,)),
+            body_heading=cat([f.body_heading for f in frames], (0,)),
             tangent=cat([f.tangent for f in frames], (0, 2)),
             normal=cat([f.normal for f in frames], (0, 2)),
             start=cat([f.arc[:-1] for f in frames], (0,)),
@@ -331,7 +368,7 @@ class PathStack:
         i = self.segment(fid, s)
         a = s - self.start[i]
         xy = self.vertices[i] + a[..., None] * self.tangent[i] + n[..., None] * self.normal[i]
-        return xy, self.heading[i]
+        return xy, self.body_heading[i]
 
     def velocity(self, fid, s, v_s, v_n) -> np.ndarray:
         """World velocities (…, 2) of path velocities ``(v_s, v_n)`` at ``s`` on frames ``fid``."""

@@ -104,3 +104,9 @@ PATH_DUP_TOL_M = 1e-9
 #: deviate from their line by round-off only (~1e-13 m on coordinates of ~1e3 m), so they merge;
 #: every input point lies within this of the frame's polyline.
 PATH_COLLINEAR_TOL_M = 1e-9
+
+#: Two consecutive route chords have the same body lean (``controllers/path.py``, the angle between
+#: the body and the chord) when their leans differ by at most this (rad); a vertex where the lean
+#: changes by more is kept when collinear runs merge.  Leans computed from SUMO's body on one lane
+#: change differ by round-off (~1e-12 rad).
+PATH_LEAN_TOL_RAD = 1e-6

@@ -28,6 +28,15 @@ boxes is then exactly the closure of the footprints' union, so the cover costs n
 its segment's arc range, or laying the footprint along the path as ``[s_lo - L/2, s_hi + L/2]``,
 would miss that corner (``tests/tm/test_path_cover.py`` shows the check catching it).
 
+Leaning bodies.  Where a frame's body leans (:class:`controllers.path.PathFrame`: on a lane change
+SUMO keeps the body parallel to the lane while the route crosses it on a diagonal), the footprint
+at ``(s, n)`` has the body's heading ``theta_i + lean_i``, and box ``i`` lies in the body's frame:
+there the reference points of the segment, the parallelogram ``[a_i, b_i] x [n_lo, n_hi]`` turned
+by ``-lean_i``, are bounded by their box (its four corners' extremes), and the footprint's extents
+are added to it.  Sound for the same reason (every footprint of the segment is a body-frame
+rectangle centred in that box); exact for the body, loose by the parallelogram's slant
+(``(b_i - a_i) |sin lean_i|`` across, ``(n_hi - n_lo) |sin lean_i|`` along).
+
 Boxes per interval: one per segment met; a straight is one segment (the frame merges collinear
 runs), a curve sampled every ``delta`` gives about ``(s_hi - s_lo) / delta + 1``.
 """
@@ -118,7 +127,9 @@ def stack_box_cover(stack: PathStack, fid, s_lo, s_hi, n_lo, n_hi, back, front, 
     on frame ``fid[q]``, with a body that reaches ``back``/``front`` along and ``right``/``left``
     across its own axes from its centre (a footprint plus one-sided padding); 1-D arrays of one
     length (scalars broadcast).  Box ``i`` in segment ``i``'s frame: along ``[a_i - back, b_i +
-    front]``, across ``[n_lo - right, n_hi + left]`` (module notes).  Returns :class:`PathBoxes` with
+    front]``, across ``[n_lo - right, n_hi + left]`` (module notes); on a segment whose body leans
+    (:class:`~controllers.path.PathFrame` ``lean``), in the body's frame: the bounding box there of
+    the reference points ``[a_i, b_i] x [n_lo, n_hi]`` plus the same extents.  Returns :class:`PathBoxes` with
     ``segment`` the stack's global segment index and ``shape = (m,)``."""
     sl = np.atleast_1d(np.asarray(s_lo, dtype=float))
     m = sl.size
@@ -139,11 +150,27 @@ def stack_box_cover(stack: PathStack, fid, s_lo, s_hi, n_lo, n_hi, back, front, 
     S1 = np.where(seg == stack.last[f], np.inf, stack.end[seg])
     a = np.maximum(sl[owner], S0) - stack.start[seg]
     b = np.minimum(sh[owner], S1) - stack.start[seg]
+    nlo, nhi = nl[owner], nh[owner]
+    heading = stack.heading[seg].copy()
+    tangent, normal = stack.tangent[seg], stack.normal[seg]
+    r = np.flatnonzero(stack.body_heading[seg] != heading)
+    if len(r):  # leaning bodies: the reference points' parallelogram bounded in the body's frame
+        d = heading[r] - stack.body_heading[seg[r]]
+        c, sn = np.cos(d), np.sin(d)
+        xs = np.stack([a[r], a[r], b[r], b[r]])
+        ys = np.stack([nlo[r], nhi[r], nlo[r], nhi[r]])
+        u, v = c * xs - sn * ys, sn * xs + c * ys
+        a, b, nlo, nhi = a.copy(), b.copy(), nlo.copy(), nhi.copy()
+        a[r], b[r], nlo[r], nhi[r] = u.min(0), u.max(0), v.min(0), v.max(0)
+        heading[r] = stack.body_heading[seg[r]]
+        tangent, normal = tangent.copy(), normal.copy()
+        tangent[r] = np.column_stack([np.cos(heading[r]), np.sin(heading[r])])
+        normal[r] = np.column_stack([-tangent[r, 1], tangent[r, 0]])
     lo_x, hi_x = a - bk[owner], b + fr[owner]
-    lo_y, hi_y = nl[owner] - rt[owner], nh[owner] + lf[owner]
+    lo_y, hi_y = nlo - rt[owner], nhi + lf[owner]
     mx, my = 0.5 * (lo_x + hi_x), 0.5 * (lo_y + hi_y)
-    centre = stack.vertices[seg] + mx[:, None] * stack.tangent[seg] + my[:, None] * stack.normal[seg]
-    return PathBoxes(owner=owner, segment=seg, centre=centre, heading=stack.heading[seg].copy(),
+    centre = stack.vertices[seg] + mx[:, None] * tangent + my[:, None] * normal
+    return PathBoxes(owner=owner, segment=seg, centre=centre, heading=heading,
                      half=np.column_stack([0.5 * (hi_x - lo_x), 0.5 * (hi_y - lo_y)]), start=start, count=count,
                      shape=(m,))
 

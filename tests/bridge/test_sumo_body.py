@@ -305,3 +305,66 @@ def test_front_off_the_network_counted(world):
     w.step()
     assert w.adapter.lane_ids(["a"]) == [""]
     assert w.pose_mismatches == before + 1
+
+
+# ----------------------------------------------------------------------------- lane changes
+LANE_CHANGE = (("A1B1", "B1B2"), 0)  # from the west on lane 0, left turn: a lane change on A1B1
+
+
+def _lane_change(net, size):
+    edges, lane = LANE_CHANGE
+    r = net.route(edges, 3.0, vclass="truck", turn_max_deg=45.0, depart_lane=lane)
+    return r, RouteBody(r, net, *size)
+
+
+def test_leans_are_the_lane_s_direction_on_a_lane_change_and_0_elsewhere(net):
+    """SUMO keeps the body parallel to the lane while the route crosses to the next lane on a
+    diagonal: the chords whose middle lies on the diagonal lean by the angle from the chord to the
+    lane (the diagonal's own chords: -atan(3.2 / 30), 6.1 degrees), every other chord by 0."""
+    r, b = _lane_change(net, TRUCK)
+    assert not r.segment_on_lane.all()
+    lean = b.leans(r.waypoints)
+    W = r.waypoints
+    d = np.diff(W, axis=0)
+    h = np.arctan2(d[:, 1], d[:, 0])
+    on_diag = np.abs(np.abs(h) - np.arctan2(3.2, 30.0)) < 1e-9
+    assert on_diag.sum() >= 5
+    np.testing.assert_allclose(lean[on_diag], -h[on_diag], atol=1e-9)  # the lane runs along +x
+    sig = b.project(W[:-1] + 0.5 * d)[0]
+    seg = np.clip(np.searchsorted(b.parc, sig, side="right") - 1, 0, len(b.seg_on) - 1)
+    assert np.all(lean[b.seg_on[seg]] == 0.0)
+    straight, _ = _route(net, STRAIGHT), None
+    assert np.all(RouteBody(straight, net, *TRUCK).leans(straight.waypoints) == 0.0)
+
+
+@settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(st.floats(0.0, 1.0), st.floats(-1.0, 1.0), st.sampled_from(SIZES))
+def test_leaning_claims_cover_sumo_s_body_on_a_lane_change(net, frac, lat, size):
+    """End to end on a lane change: a leaning path frame (the route's :meth:`RouteBody.leans`), the
+    padding measured from rectangles along the bodies' headings (``PadTable`` with them), and the
+    cover of a one-point interval at the reference point (:func:`tm.path_cover.stack_box_cover`
+    with the padding): SUMO's body lies in the cover.  Tolerance 1e-9 m, as above."""
+    from controllers.path import PathFrame, PathStack
+    from tm.path_cover import points_in_boxes, stack_box_cover
+    r, b = _lane_change(net, size)
+    W, arc = r.waypoints, r.arc_length
+    f = PathFrame(W, b.leans(W))
+    d = np.diff(W, axis=0)
+    S = f.to_path(W, arc, window=1.0)[0]
+    hb = np.arctan2(d[:, 1], d[:, 0]) + f.lean[f.segment(0.5 * (S[:-1] + S[1:]))]
+    H = np.concatenate([hb[:1], hb])
+    box_lo, box_hi = (-40.0, -OFFSET_MAX_M), (1.2, OFFSET_MAX_M)
+    table = b.pad_table(arc, W, H, box_lo, box_hi, frame="path")
+    diag = np.flatnonzero(~b.seg_on)[0]
+    a0, a1 = b.parc[diag] - 5.0, b.parc[diag + 1] + 5.0  # the diagonal and 5 m either side
+    sigma = a0 + frac * (a1 - a0)
+    k = int(np.searchsorted(arc, sigma, side="left"))
+    e = lat * box_hi[1]
+    _, _, _, corners = b.bodies(np.array([sigma]), np.array([e]))
+    q, t, _ = _at(b.poly, b.parc, np.array([sigma]))
+    p = q[0] + e * np.array([-t[0, 1], t[0, 0]])
+    s_p, n_p = f.to_path(p[None], [S[k]], window=5.0)
+    pad = table.pads(k, sigma - 0.1)
+    boxes = stack_box_cover(PathStack([f]), 0, s_p, s_p, n_p, n_p, size[0] / 2 + pad[0], size[0] / 2 + pad[1],
+                            size[1] / 2 + pad[2], size[1] / 2 + pad[3])
+    assert points_in_boxes(boxes, [0], corners, 1e-9).any()

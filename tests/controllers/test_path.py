@@ -182,3 +182,44 @@ def test_to_path_refuses_bad_input():
         f.to_path(np.array([1.0, 0.0]), 0.0)
     with pytest.raises(PathError, match="window"):
         f.to_path(np.array([[1.0, 0.0]]), 0.0, window=-1.0)
+
+
+# ----------------------------------------------------------------------------- body lean
+def test_a_lean_keeps_its_vertex_and_turns_the_body_not_the_path():
+    """A straight subsampled into 6 chords, the middle two leaning by -6 degrees (a lane change's
+    diagonal with SUMO's body along the lane): the frame keeps the vertices where the lean changes
+    (3 segments, not 1), maps (s, n) as without a lean, and gives the body heading."""
+    W = np.column_stack([np.arange(7) * 3.0, np.zeros(7)])
+    lean = np.radians([0, 0, -6, -6, 0, 0])
+    f, plain = PathFrame(W, lean), PathFrame(W)
+    assert plain.n_segments == 1 and f.n_segments == 3
+    np.testing.assert_allclose(f.arc, [0, 6, 12, 18])
+    np.testing.assert_allclose(np.degrees(f.lean), [0, -6, 0])
+    np.testing.assert_allclose(f.body_heading, f.heading + f.lean)
+    s, n = np.array([1.0, 7.5, 13.0]), np.array([0.3, -0.2, 0.0])
+    xy, h = f.to_world(s, n)
+    xy0, h0 = plain.to_world(s, n)
+    np.testing.assert_allclose(xy, xy0, atol=1e-12)
+    np.testing.assert_allclose(np.degrees(h), [0, -6, 0], atol=1e-12)
+    assert np.all(h0 == 0.0)
+
+
+def test_leans_within_the_tolerance_merge_and_take_the_first():
+    W = np.column_stack([np.arange(4) * 3.0, np.zeros(4)])
+    f = PathFrame(W, [0.1, 0.1 + 1e-9, 0.1 - 1e-9])
+    assert f.n_segments == 1 and f.lean[0] == 0.1
+
+
+@pytest.mark.parametrize("lean, match", [([0.1], "one per chord"), ([0.1, np.nan], "finite"),
+                                         ([0.0, 1.6], "within 90 degrees")])
+def test_bad_leans_are_refused_clearly(lean, match):
+    with pytest.raises(PathError, match=match):
+        PathFrame([[0, 0], [3, 0], [6, 0]], lean)
+
+
+def test_a_dropped_duplicate_point_keeps_the_chords_lean():
+    """Chords of the kept points take the lean of the input chord they end with."""
+    W = [[0, 0], [3, 0], [3, 0], [6, 1]]
+    f = PathFrame(W, [0.0, 0.2, -0.1])
+    assert f.n_segments == 2
+    np.testing.assert_allclose(f.lean, [0.0, -0.1])

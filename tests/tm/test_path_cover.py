@@ -223,3 +223,61 @@ def test_empty_intervals_get_no_box_and_bad_input_is_refused():
         path_box_cover(f, 0.0, np.nan, 0.0, 0.0, *CAR)
     with pytest.raises(PathError, match=">= 0"):
         path_box_cover(f, 0.0, 1.0, 0.0, 0.0, -1.0, 1.0)
+
+
+# ----------------------------------------------------------------------------- leaning bodies
+def _random_leans(rng, n_chords):
+    """Per chord: 0, or one of a few leans up to 30 degrees (runs of equal leans: merged segments)."""
+    choice = np.radians([0.0, 0.0, 6.0, -6.0, 30.0, -17.0])
+    return choice[rng.integers(0, len(choice), n_chords)]
+
+
+@settings(max_examples=60, deadline=None)
+@given(seeds, st.integers(1, 12), st.floats(0.5, 12.0), st.floats(0.5, 3.0))
+def test_every_leaning_footprint_of_the_interval_lies_in_one_box(seed, n_seg, length, width):
+    """Frames whose bodies lean (random leans per chord, up to 30 degrees): the footprint at every
+    sampled ``(s, n)``, along the body's heading, lies in one box of its interval (tolerance as
+    above); and it does not lie in the cover of the frame without the leans wherever a lean is
+    met (the check is not vacuous)."""
+    rng = np.random.default_rng(seed)
+    P = random_polyline(rng, n_seg, min_len=0.3)
+    lean = _random_leans(rng, len(P) - 1)
+    f = PathFrame(P, lean)
+    s_lo, s_hi, n_lo, n_hi = random_intervals(rng, f, 12)
+    boxes = path_box_cover(f, s_lo, s_hi, n_lo, n_hi, length, width)
+    owner, s, n = samples(f, s_lo, s_hi, n_lo, n_hi, rng=rng)
+    assert footprints_not_in_one_box(f, boxes, owner, s, n, length, width) == 0
+    assert uncovered_corners(f, boxes, owner, s, n, length, width) == 0
+    leaning = f.lean[f.segment(s)] != 0
+    assume(leaning.any())
+    plain = path_box_cover(PathFrame(P), s_lo, s_hi, n_lo, n_hi, length, width)
+    assert footprints_not_in_one_box(f, plain, owner[leaning], s[leaning], n[leaning], length, width) > 0
+
+
+def test_a_lane_change_cover_along_the_lane_is_0_7_m_narrower_for_a_truck():
+    """A truck (7.1 x 2.4 m) 2 m before the end of a lane change (3.2 m across in 30 m, 6.1
+    degrees), its claim reaching 3 m on along the new lane: laid along the diagonal, a cover that
+    holds the lane-parallel body must be padded by L sin(lean) across (0.75 m) and is then turned
+    with the diagonal; laid along the lane it reaches at most ``W/2 + |n|`` beyond the lane's
+    centre line plus the diagonal's slant over the 2 m.  The figure of ``grid`` seed 1 (truck 77
+    and bus 85, head-on beside each other for good): the leaning cover reaches >= 0.7 m less
+    toward the oncoming lane."""
+    P = np.array([[0.0, 0.0], [30.0, 0.0], [60.0, -3.2], [90.0, -3.2]])
+    lean_deg = float(np.degrees(np.arctan2(3.2, 30.0)))
+    f = PathFrame(P, np.radians([0.0, lean_deg, 0.0]))
+    L, W = 7.1, 2.4
+    s0 = f.arc[2] - 2.0
+    lean_box = path_box_cover(f, s0, s0 + 5.0, -0.1, 0.1, L, W)
+    # along the diagonal: the body's corner reaches L sin(lean) beyond the rectangle, so the pads
+    # needed are (back, front, right, left) = (~0, ~0.4, ~0.75, 0) in the diagonal's axes
+    pad_r = L * np.sin(np.radians(lean_deg))
+    from tm.path_cover import stack_box_cover
+    from controllers.path import PathStack
+    flat = stack_box_cover(PathStack([PathFrame(P)]), 0, s0, s0 + 5.0, -0.1, 0.1, L / 2, L / 2 + 0.4,
+                           W / 2 + pad_r, W / 2)
+    low = lambda b: b.polygons()[:, :, 1].min()  # noqa: E731  (toward the oncoming lane: -y)
+    assert low(lean_box) >= -3.2 - W / 2 - 0.1 - 2.0 * np.sin(np.radians(lean_deg)) - 1e-9
+    assert low(lean_box) - low(flat) >= 0.7
+    # and the lane-parallel body at every sampled pose lies in the leaning cover
+    owner, s, n = samples(f, [s0], [s0 + 5.0], [-0.1], [0.1])
+    assert footprints_not_in_one_box(f, lean_box, owner, s, n, L, W) == 0
