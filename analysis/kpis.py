@@ -299,7 +299,9 @@ def run_tables(sim, tripinfo=None) -> tuple[dict, pd.DataFrame, pd.DataFrame]:
         constraint_violations``), :func:`analysis.safety.verdict` of them (``safe``,
         ``safety_violations``), and the junction layer's ``zones``, ``zones_ignored`` (zones it does
         not use), ``junction_tokens`` (tokens handed out), ``junction_given_back`` (at red lights)
-        and ``junction_withheld`` (requests withheld for want of one).
+        ``junction_withheld`` (requests withheld for want of one) and ``junction_chain_revoked``
+        (tokens taken back in the hand-out because a chained zone's was not free,
+        :meth:`tm.authority_gate.AuthorityGate._hand_out`).
     steps, vehicles : DataFrame
     """
     from controllers.classes import builtin_classes
@@ -336,5 +338,6 @@ def run_tables(sim, tripinfo=None) -> tuple[dict, pd.DataFrame, pd.DataFrame]:
     if gate is not None:
         figures.update(zones=len(gate.zones), zones_ignored=int(getattr(sim, "zones_ignored", 0)),
                        junction_tokens=int(gate.tokens_granted), junction_given_back=int(gate.tokens_given_back),
-                       junction_withheld=int(gate.requests_withheld))
+                       junction_withheld=int(gate.requests_withheld),
+                       junction_chain_revoked=int(getattr(gate, "chain_revoked", 0)))
     return figures, steps, vehicles

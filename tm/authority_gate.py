@@ -53,6 +53,14 @@ changes is where they apply:
   is another one stopped in its path.  (With the moving claims' width, ``max |y|`` of every level
   plus ``W/2``, adjacent lanes' corridors meet: on ``grid``, 300 s, seeds 1 / 2: 88 / 77 of 150
   arrived, against 104 / 97 with this width.);
+* **chained zones** (:meth:`AuthorityGate._wanting`, :meth:`AuthorityGate._hand_out`): where a
+  route enters the next zone's guard at or before the exit slot of the one it enters now, it
+  cannot stop between them outside both; it asks for both tokens at once and gets both or
+  neither (a token handed out ahead is kept until its claim has reached that guard).  Waiting for
+  the second at its entry line while holding the first, two vehicles crossing such a pair in
+  opposite directions each held one token and waited for the other's, for good (SUMO's
+  ``fkk_in``: ``3_right.0`` and ``1_right.0`` at ``276184048`` and ``gneJ21``, 5 m between the
+  guards);
 * **release**: when every ``S_k`` (the bounding box of their union) has left the shared guard --
   the guard of the entry line: a class's own, smaller one released a car's token at the step it
   was handed out (its claim, from where it is to its stop point at the entry line, not yet in the
@@ -193,6 +201,8 @@ class AuthorityGate(JunctionGate):
     """
 
     pass_blocked = True
+    #: Chained zones asked for together, all or none (module notes); off: one zone at a time.
+    chain = True
 
     def __init__(self, zones, classes: dict):
         super().__init__(zones, classes)
@@ -204,6 +214,12 @@ class AuthorityGate(JunctionGate):
         #: over the run: token hand-outs deferred because the candidate's path meets a waiter (:meth:`_yields`)
         self.yielded = 0
         self._wide: dict = {}  # (vehicle, zone, waypoint, first) -> its wide path (:meth:`_wide_path`)
+        #: (zone, vehicle): tokens handed out with a chained zone's (:meth:`_wanting`) whose holder's
+        #: claim has not reached the zone's guard yet; kept until it has (:meth:`_release`)
+        self.ahead: set[tuple[int, str]] = set()
+        #: over the run: token hand-outs taken back because a zone chained to it could not be handed
+        #: out in the same round (:meth:`_hand_out`)
+        self.chain_revoked = 0
         #: how far a requester's standing box may lie beyond its current claim box (m): its stop
         #: point moves by at most δ, plus the largest hold box and a padding allowance
         self.guard_margin = max((c.delta + c.hold + 0.5 * np.hypot(c.length, c.width) for c in self.classes.values()),
@@ -255,9 +271,11 @@ class AuthorityGate(JunctionGate):
         return limit
 
     def _span_of(self, fleet: JunctionFleet, row: int, z: int, target: int):
-        """``(entry, exit, exits)`` of zone ``z``'s interval holding waypoint ``target``, or None."""
+        """``(entry, exit, exits)`` of zone ``z``'s first interval not left before waypoint
+        ``target`` (the one holding it, or the next one: a chained zone's, :meth:`_wanting`), or
+        None."""
         zs, e, x, ex = self.intervals(fleet, row)
-        hit = np.flatnonzero((zs == z) & (e <= target) & (target <= x))
+        hit = np.flatnonzero((zs == z) & (target <= x))
         return None if not len(hit) else (int(e[hit[0]]), int(x[hit[0]]), bool(ex[hit[0]]))
 
     def _wanting(self, fleet: JunctionFleet, r: np.ndarray, new_lo: np.ndarray,
@@ -282,8 +300,74 @@ class AuthorityGate(JunctionGate):
         if self.given_back:  # a token given back is needed again, from inside the guard too
             fresh |= on & np.array([zz in self.given_back.get(ids[i], ()) for i, zz in zip(row.tolist(), z.tolist())],
                                    dtype=bool).reshape(-1)
-        o = np.lexsort((row[fresh], z[fresh]))
-        return z[fresh][o], row[fresh][o]
+        wz, wr = z[fresh], row[fresh]
+        # chained zones: the intervals that begin at or before the exit slot of one entered now
+        # (and so on along the route) are wanted with it, all or none (:meth:`_hand_out`)
+        first = np.r_[0, np.cumsum(cnt)]
+        extra_z, extra_r = [], []
+        for f in np.flatnonzero(fresh & self.chain).tolist():
+            rw, n_i = int(row[f]), int(np.searchsorted(first, f, side="right") - 1)
+            span = np.arange(first[n_i], first[n_i + 1])
+            later = span[e[span] > e[f]]
+            later = later[np.argsort(e[later], kind="stable")]  # the route's order
+            reach = int(x[f])
+            for j in later.tolist():
+                if e[j] > reach:
+                    break
+                if ids[rw] not in self.holders[int(z[j])]:
+                    extra_z.append(int(z[j]))
+                    extra_r.append(rw)
+                reach = max(reach, int(x[j]))
+        if extra_z:
+            wz, wr = np.r_[wz, extra_z].astype(np.intp), np.r_[wr, extra_r].astype(np.intp)
+            key = np.unique(wz * (int(wr.max()) + 1) + wr)
+            wz, wr = key // (int(wr.max()) + 1), key % (int(wr.max()) + 1)
+        o = np.lexsort((wr, wz))
+        return wz[o], wr[o]
+
+    def _hand_out(self, t: int, fleet: JunctionFleet, pos: dict, wz: np.ndarray,
+                  wrow: np.ndarray) -> np.ndarray:
+        """:meth:`JunctionGate._hand_out`, all or none per vehicle: a vehicle that wants several
+        tokens this round (chained zones, :meth:`_wanting`) keeps those handed out now only if
+        it has every one; else they go back (it keeps its place in the waiting order).  Tokens
+        kept for a zone whose guard its claim has not reached yet are marked :attr:`ahead`."""
+        ids = fleet.ids
+        before = [set(h) for h in self.holders]
+        allowed = super()._hand_out(t, fleet, pos, wz, wrow)
+        if not len(wrow):
+            return allowed
+        short = np.unique(wrow[~allowed])
+        new = np.array([ids[r] not in before[z] for z, r in zip(wz.tolist(), wrow.tolist())], dtype=bool)
+        back = new & allowed & np.isin(wrow, short)
+        for z, r in zip(wz[back].tolist(), wrow[back].tolist()):
+            del self.holders[z][ids[r]]
+            self.tokens_granted -= 1
+            self.chain_revoked += 1
+        allowed &= ~back
+        kept = new & allowed
+        if kept.any():
+            cur_lo, cur_hi = fleet.claim_lo, fleet.claim_hi
+            for z, r in zip(wz[kept].tolist(), wrow[kept].tolist()):
+                if not (np.all(cur_lo[r] <= self.hi[z]) and np.all(cur_hi[r] >= self.lo[z])):
+                    self.ahead.add((z, ids[r]))
+        return allowed
+
+    def _release(self, pos: dict, cur_lo: np.ndarray, cur_hi: np.ndarray) -> None:
+        """:meth:`JunctionGate._release`, except the tokens :attr:`ahead`: kept until the holder's
+        claim has reached the zone's guard (then released as any other once it has left it), or
+        the holder is gone."""
+        keep = {}
+        for z, v in list(self.ahead):
+            i = pos.get(v, -1)
+            if i < 0 or v not in self.holders[z]:
+                self.ahead.discard((z, v))
+            elif np.all(cur_lo[i] <= self.hi[z]) and np.all(cur_hi[i] >= self.lo[z]):
+                self.ahead.discard((z, v))  # in the guard now: released as usual when it leaves
+            else:
+                keep[(z, v)] = self.holders[z].pop(v)
+        super()._release(pos, cur_lo, cur_hi)
+        for (z, v), c in keep.items():
+            self.holders[z][v] = c
 
     def _path(self, fleet: JunctionFleet, row: int, z: int) -> np.ndarray | None:
         """Waypoints (m, 2) of row ``row``'s route from zone ``z``'s entry to its exit slot, for the

@@ -593,3 +593,58 @@ def test_waiters_that_would_all_yield_round_a_cycle_do_not_all_wait():
     assert [gate._yields(None, r, 0, waiters) for r in range(4)] == [False] * 4
     with_relation({0: {1}, 1: {0}, 2: set(), 3: set()})  # mutual: neither is a target (paths meet both ways)
     assert not gate._yields(None, 0, 0, waiters) and not gate._yields(None, 1, 0, waiters)
+
+
+# ----------------------------------------------------------------------------- chained zones
+J2 = Zone("J2", (13.0, -5.0), (23.0, 5.0))  # its guard starts 1.6 m past J's: no car stands between
+
+
+def _chain_run(gate, steps=300):
+    """A through J then J2, B through J2 then J, on lanes whose corridors meet (0.8 m either side
+    of the axis); each asks for its next waypoint every step and moves
+    when the gate lets it (claims: the hold boxes).  Returns the stop points and, per step, the
+    zones each one holds."""
+    def turn(a, corner, b):
+        W1, H1 = _route(a, corner)
+        W2, H2 = _route(corner, b)
+        return np.vstack([W1, W2[1:]]), np.r_[H1, H2[1:]]
+    # A comes up from the south into J and turns east through J2; B comes down from the north into
+    # J2 and turns west through J: neither one's entry line lies on the other's exit road
+    routes = {"A": turn((0.0, -40.0), (0.0, -0.8), (60.0, -0.8)), "B": turn((18.0, 40.0), (18.0, 0.8), (-60.0, 0.8))}
+    scene = Scene({}, routes=routes)
+    f = scene.fleet()
+    (za, ea, xa, _), (zb, eb, xb, _) = gate.intervals(f, 0), gate.intervals(f, 1)
+    k = {"A": int(ea[za == 0][0]) - 1, "B": int(eb[zb == 1][0]) - 1}  # both at their first entry line
+    held = []
+    for t in range(steps):
+        done = {v for v, (W, _) in routes.items() if k[v] >= len(W) - 1}
+        asked = Scene({}, k=k, idle=done, routes=routes).withhold(gate, t=t)
+        for v in asked:
+            k[v] += 1
+        held.append({v: {z for z in range(2) if v in gate.holders[z]} for v in routes})
+    return k, held, (za, ea, xa), (zb, eb, xb), {v: len(W) - 1 for v, (W, _) in routes.items()}
+
+
+@pytest.mark.parametrize("chain", [True, False])
+def test_chained_zones_are_taken_together_or_two_vehicles_lock(chain):
+    """Two zones whose guards lie 1.6 m apart (a car's standing box is 4.5 m long): a route through
+    both enters the second guard before its exit slot from the first.  A (east, J then J2) and B
+    (west, J2 then J), their corridors meeting in both zones, reach their first entry lines at
+    once.  Asked for one zone at a time (``chain`` off), A takes J and B takes J2, each moves up
+    to the next zone's entry line inside the guard it holds and waits there for the other's token:
+    neither moves again (the ``fkk_in`` lock, issue 12).  Chained, A is handed both tokens at
+    once, B neither; A drives through both and B follows: both reach their routes' ends."""
+    gate = AuthorityGate([J, J2], {"car": CAR})
+    gate.chain = chain
+    k, held, (za, ea, xa), (zb, eb, xb), ends = _chain_run(gate)
+    assert ea[za == 1][0] <= xa[za == 0][0] and eb[zb == 0][0] <= xb[zb == 1][0]  # the chain, both ways
+    if chain:
+        assert k == ends
+        assert held[0] == {"A": {0, 1}, "B": set()}  # both tokens at the first hand-out, to A alone
+        # never one token each; B was handed J once A had left it, and gave it back (J2 was A's)
+        assert not any(h["A"] and h["B"] and h["A"] | h["B"] == {0, 1} for h in held)
+        assert gate.chain_revoked > 0
+    else:
+        assert held[0] == {"A": {0}, "B": {1}}
+        assert k["A"] < ends["A"] and k["B"] < ends["B"]
+        assert held[-1] == {"A": {0}, "B": {1}}  # for good: each waits for the other's token
