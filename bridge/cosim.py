@@ -34,7 +34,7 @@ import numpy as np
 
 from controllers.classes import VehicleClass
 from controllers.plant import DISTURBANCES, step as plant_step
-from controllers.settings import ControllerSettings, SynthesisSettings
+from controllers.settings import AUTHORITY_MAX_LEVELS, ControllerSettings, SynthesisSettings
 from controllers.speed_limits import SpeedSettings, free_flow_time, restart_slack, route_speeds
 from controllers.stmpc import STMPC
 from bridge.groups import _Group, _headings
@@ -254,7 +254,8 @@ class Cosim:
                 raise ValueError(f"controller 'authority': vehicle class(es) {bad} have no comfort_decel; "
                                  "use classes with one (car, bus, truck) or controller 'paper'")
         syn = synthesis or SynthesisSettings()
-        self.families = {c: synthesize(vc.model, replace(syn, authority_decel=vc.comfort_decel)
+        self.families = {c: synthesize(vc.model, replace(syn, authority_decel=vc.comfort_decel,
+                                                         max_levels=max(syn.max_levels, AUTHORITY_MAX_LEVELS))
                                        if self.authority else synthesis) for c, vc in self.classes.items()}
         #: claim models (authority mode): reach-tightened, time-indexed claims (tm.reach_book)
         self.reach = ReachBook(self.families, {c: (vc.length, vc.width) for c, vc in self.classes.items()}) \

@@ -36,7 +36,7 @@ from bridge.sumo_adapter import SumoAdapter, SumoError
 from bridge.sumo_inputs import InputError, headless_config, parse_xml, prepare_inputs
 from bridge.sumo_pedestrians import read_personinfo, read_persons, walk_regions
 from bridge.waypoints import RouteError, load_net, trim_start, trim_start_index
-from controllers.classes import VehicleClass, VTypeParams, builtin_classes, vtype_class
+from controllers.classes import VehicleClass, VTypeParams, builtin_classes, vtype_class, vtype_speed_cap
 from controllers.tolerances import HOLD_TOL_M, HOLD_TOL_RAD, POSE_TOL_M
 from bridge.sumo_body import BACK_M, RouteBody
 from tm.pedestrians import PedestrianRule, PedestrianSettings
@@ -337,14 +337,17 @@ def _classes_for(scenario, demand, classes, source=None):
     return out
 
 
-def _vtype_classes(demand) -> tuple[dict[str, VehicleClass], dict[str, str]]:
-    """One class per distinct vType parameter set (SUMO's own values), and each vehicle's class."""
+def _vtype_classes(demand, max_lane_speed: float) -> tuple[dict[str, VehicleClass], dict[str, str]]:
+    """One class per distinct vType parameter set (SUMO's own values, the speed capped by
+    :func:`controllers.classes.vtype_speed_cap` of the network's fastest lane), and each
+    vehicle's class."""
     classes: dict[str, VehicleClass] = {}
     of_type: dict[str, str] = {}
+    cap = vtype_speed_cap(max_lane_speed)
     for tid, t in demand.types.items():
         p = VTypeParams(t.vclass, t.length, t.width, t.accel, t.decel, t.max_speed)
         if p.name not in classes:
-            classes[p.name] = vtype_class(p)
+            classes[p.name] = vtype_class(p, cap)
         of_type[tid] = p.name
     return classes, {pv.id: of_type[pv.type_id] for pv in demand.vehicles}
 
@@ -469,7 +472,7 @@ def run_sumo(target: str, out: Path, opts, observers_extra: list | None = None) 
                                    inputs=inputs, preflight=False,
                                    extra_args=["--begin", f"{begin:.10g}",
                                                "--end", f"{begin + duration + END_MARGIN_S:.10g}"])
-            classes, cls_of = _vtype_classes(demand)
+            classes, cls_of = _vtype_classes(demand, load_net(net).max_lane_speed)
         else:
             demand = adapter.start(sumocfg, tripinfo_path=tripinfo, seed=seed, gui=opts.gui)
             limit = run_limit([pv.depart_s for pv in demand.vehicles], opts.duration)

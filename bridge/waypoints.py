@@ -484,6 +484,11 @@ class NetGeometry:
         """A lane's speed limit (m/s), internal lanes included."""
         return float(self._net.getLane(lane_id).getSpeed())
 
+    @functools.cached_property
+    def max_lane_speed(self) -> float:
+        """The highest speed limit of any lane of the network (m/s; 0 without lanes)."""
+        return max((float(lane.getSpeed()) for e in self._net.getEdges() for lane in e.getLanes()), default=0.0)
+
     def speed_limits(self, route: "RouteWaypoints") -> np.ndarray:
         """The speed limit of the lane under each waypoint of ``route`` (m/s, (K,))."""
         return np.array([self.lane_speed(lane) for lane in route.lane_ids], dtype=float)

@@ -11,16 +11,29 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
+
 from controllers.models import VehicleModel, double_integrator, drag_integrator
 
 __all__ = ["VehicleClass", "VTypeParams", "builtin_classes", "get_class", "vtype_class", "ClassError",
-           "CITY_TURN_MAX_DEG", "CITY_V_MAX", "CITY_U_MAX"]
+           "CITY_TURN_MAX_DEG", "CITY_V_MAX", "VTYPE_V_MAX", "CITY_U_MAX", "BRAKING_BUDGET_M", "vtype_speed_cap"]
 
 #: Largest heading change between successive route segments the urban classes accept.
 CITY_TURN_MAX_DEG = 45.0
-#: Speed bound along the road of the urban classes (m/s, 50 km/h): a vType's maxSpeed is
-#: capped by it (lane speed limits are not read yet).
+#: Speed bound along the road of the built-in urban classes car, bus and truck (m/s, 50 km/h).
 CITY_V_MAX = 13.89
+#: Largest speed bound along the road of a class built from a vType (m/s, 130 km/h): its maxSpeed
+#: capped by this; the lanes' speed limits bind below it (``--speed-limits``).  At 13.89 m/s
+#: (the urban classes' bound) muvsim drove SUMO's motorway demos (``ramp``: 33.3 m/s lanes,
+#: ``A10KW``) at 50 km/h.  Synthesis of a car's movement-authority family to 36.11 m/s: 0.7 s
+#: (one core, measured against 0.5 s at 13.89 m/s).
+VTYPE_V_MAX = 36.11
+#: Longest movement-authority braking distance of a class built from a vType (m): its speed bound
+#: is at most ``sqrt(2 a_c B)``.  A truck vType (accel 1.3 m/s^2, so ``a_c`` = 1.04) at 36.11 m/s
+#: needs 633 m, more than the synthesis's 200 levels of δ = 3 m reach, and the run failed
+#: (SUMO's ``A10KW``); with 300 m it drives at most 24.98 m/s (90 km/h), a car vType (``a_c`` =
+#: 2.08) at most 35.33 m/s.
+BRAKING_BUDGET_M = 300.0
 #: Largest acceleration bound along the road of a class built from a vType (m/s^2).
 CITY_U_MAX = 3.0
 
@@ -115,24 +128,38 @@ class VTypeParams:
                 f"-v{self.max_speed:g}")
 
 
-def vtype_class(p: VTypeParams) -> VehicleClass:
+def vtype_speed_cap(max_lane_speed: float) -> float:
+    """The speed bound of the classes built from a network's vTypes (m/s): its fastest lane's
+    limit, at least :data:`CITY_V_MAX` (a city network keeps the urban classes' bound and sets)
+    and at most :data:`VTYPE_V_MAX`.  Measured on SUMO's ``grid6`` (lanes 13.9 m/s, 180 s): with
+    every vType at 36.11 m/s, 18 arrivals against 26 -- larger sets for speeds no lane allows."""
+    return float(min(max(float(max_lane_speed), CITY_V_MAX), VTYPE_V_MAX))
+
+
+def vtype_class(p: VTypeParams, v_cap: float = VTYPE_V_MAX) -> VehicleClass:
     """A road-frame urban class built from a vType's parameters.
 
     Footprint: exactly the vType's ``length x width`` (what SUMO moves and judges).
     Dynamics: a double integrator in the road frame like the built-in ``car``, with the
-    speed bound along the road ``min(max_speed, CITY_V_MAX)`` and the input bound
+    speed bound along the road ``min(max_speed, v_cap)`` (``v_cap`` at most :data:`VTYPE_V_MAX`:
+    the network's fastest lane, :func:`vtype_speed_cap`) and the input bound
     ``min(accel, decel, CITY_U_MAX)`` (the model's input box is symmetric, so the smaller
     of the two abilities bounds both); across the road as ``car``.  Its sets are
     synthesised on first use and cached on disk by the model (:mod:`controllers.synthesis`).
-    ``comfort_decel`` (movement-authority mode): ``min(0.8 u, CAR_COMFORT_DECEL)``.
+    ``comfort_decel`` (movement-authority mode): ``min(0.8 u, CAR_COMFORT_DECEL)``; the speed
+    bound is also at most ``sqrt(2 comfort_decel BRAKING_BUDGET_M)``.
     """
-    v = round(min(p.max_speed, CITY_V_MAX), 4)
+    if not (np.isfinite(v_cap) and v_cap > 0):
+        raise ValueError(f"vtype_class: v_cap must be a speed > 0 m/s, got {v_cap!r}")
     u = round(min(p.accel, p.decel, CITY_U_MAX), 4)
+    comfort = min(CAR_COMFORT_DECEL, round(0.8 * u, 4))
+    # and no faster than it stops within the braking budget at its comfortable deceleration
+    v_brake = np.floor(np.sqrt(2.0 * comfort * BRAKING_BUDGET_M) * 1e4) / 1e4
+    v = round(min(p.max_speed, v_cap, VTYPE_V_MAX, v_brake), 4)
     model = double_integrator(v_max=(v, 0.2), u_max=(u, 0.5), d_max=0.005, name=p.name, frame="road",
                               turn_max_deg=CITY_TURN_MAX_DEG, delta=3.0)
     # movement-authority mode: a comfortable deceleration of 0.8 of the input bound (as the built-in
-    # truck and bus: 1.2 of 1.5 m/s^2), at most the car's
-    comfort = min(CAR_COMFORT_DECEL, round(0.8 * u, 4))
+    # truck and bus: 1.2 of 1.5 m/s^2), at most the car's (comfort, above)
     return VehicleClass(p.name, model, length=float(p.length), width=float(p.width), vclass=p.vclass,
                         comfort_decel=comfort)
 

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
 
-__all__ = ["SynthesisSettings", "ControllerSettings", "SettingsError", "default_cache_dir"]
+__all__ = ["AUTHORITY_MAX_LEVELS", "SynthesisSettings", "ControllerSettings", "SettingsError", "default_cache_dir"]
 
 SOLVERS = ("exact", "daqp", "proxsuite")
 STRUCTURES = ("auto", "full")
@@ -22,6 +22,13 @@ def default_cache_dir() -> Path:
     """Where synthesised sets are cached: ``$MUVSIM_CACHE_DIR`` or ``~/.cache/muvsim``."""
     env = os.environ.get("MUVSIM_CACHE_DIR")
     return Path(env) if env else Path.home() / ".cache" / "muvsim"
+
+
+#: ``SynthesisSettings.max_levels`` of the movement-authority families the co-simulation builds
+#: (at least this): a vType class braking at 1.04 m/s^2 from 24.98 m/s (the braking budget of
+#: ``controllers.classes.BRAKING_BUDGET_M``) needs 224 levels (0.7 s on one core), more than the
+#: default 200.  The paper's families stop at condition (8) long before either bound.
+AUTHORITY_MAX_LEVELS = 400
 
 
 @dataclass(frozen=True)
