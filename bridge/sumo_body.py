@@ -346,7 +346,7 @@ class PadTable:
         chord between front and back cuts the inside of the curve): symmetric pads claimed the
         larger side on both and on ``grid`` locked junctions (issue 12)."""
         k = int(min(max(k, 0), len(self.W) - 1))
-        j0 = int(np.searchsorted(self.sig, sigma_lo, side="left"))
+        j0 = self.window_start(sigma_lo)
         tab = self._suffix.get(k)
         if tab is None or j0 < tab[0]:  # a window start before the table's (rolled back): built anew from it
             tab = self._suffix[k] = self._table(k, j0)
@@ -355,6 +355,14 @@ class PadTable:
                     del self._suffix[old]
         base, S = tab
         return S[min(j0 - base, len(S) - 1)]
+
+    def window_start(self, sigma_lo: float) -> int:
+        """The first sample a window starting at arc ``sigma_lo`` counts: the last one at or before
+        it.  A position between two samples has the body of one or the other where the body jumps
+        (the step term covers only the smooth part): the first sample past ``sigma_lo`` alone missed
+        the body of the one before (a truck at the window start before a left turn, 1.5 m off the
+        route: 0.11 m outside its padded rectangle, ``tests/bridge/test_sumo_body.py``)."""
+        return max(int(np.searchsorted(self.sig, sigma_lo, side="right")) - 1, 0)
 
     def _table(self, k: int, j_base: int) -> tuple[int, np.ndarray]:
         """Pads of waypoint ``k`` for every window start ``j0 >= j_base``: row ``j0 - j_base`` is

@@ -18,6 +18,7 @@ from bridge.cli import main
 from bridge.sumo_adapter import SumoAdapter
 from bridge.sumo_inputs import prepare_inputs
 from bridge.sumo_world import _vtype_classes
+from bridge.waypoints import load_net
 from sumo_nets.scenario import SUMO_DEFAULT_SEED, read_sumocfg
 from sumo_nets.sumo_tools import run_tool, sumo_home
 
@@ -101,7 +102,7 @@ def test_emergency_and_bicycle_footprints_equal_sumos(kinds_net, tmp_path):
     ad = SumoAdapter()
     demand = ad.expand_demand(cfg.path, inputs, begin_s=0.0, end_s=30.0, seed=1, step_length=0.1,
                               work_dir=tmp_path / "in")
-    classes, cls_of = _vtype_classes(demand)
+    classes, cls_of = _vtype_classes(demand, load_net(cfg.net).max_lane_speed)
     assert [v.id for v in demand.vehicles] == ["e", "k", "o"]
     with ad:
         ad.start(cfg.path, demand=demand, inputs=inputs, preflight=False)
