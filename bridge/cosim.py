@@ -243,7 +243,7 @@ class Cosim:
         if self.paths is not None:
             # SUMO's bodies lean off the route on lane changes (world.body_leans; authority mode,
             # whose claims cover the world's bodies)
-            leans = getattr(self.world, "body_leans", None) if settings.controller == "authority" else None
+            leans = getattr(self.world, "body_leans", None) if self.authority else None
             for s_ in specs:  # every route must make a frame (a clear error now, not at admission)
                 self.paths.frame(s_.id, s_.waypoints, leans(s_) if leans is not None else None)
         cs = ControllerSettings(solver=settings.solver, switching=settings.switching,

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from bridge.groups import _headings
 from controllers.path import PathError, PathFrame, PathStack
 from tm.path_claims import PathPlace
 
@@ -58,12 +59,9 @@ class PathFleet:
         the lean of the frame's segment holding the chord's middle (:meth:`frame` first)."""
         f = self._frames[vid]
         W = np.asarray(W, dtype=float)
-        d = np.diff(W, axis=0)
-        h = np.arctan2(d[:, 1], d[:, 0]) if len(d) else np.zeros(0)
         S = self.waypoints(vid, W, arc)[:, 0]
-        lean = f.lean[f.segment(0.5 * (S[:-1] + S[1:]))] if len(d) else np.zeros(0)
-        hb = h + lean
-        return np.concatenate([hb[:1] if len(hb) else [0.0], hb])
+        lean = f.lean[f.segment(0.5 * (S[:-1] + S[1:]))]
+        return _headings(W) + (np.concatenate([lean[:1], lean]) if len(lean) else 0.0)
 
     def forget(self, vid: str) -> None:
         self._frames.pop(vid, None)

@@ -79,6 +79,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from controllers.authority import AuthorityTables
+from tm.boxes import boxes_meet
 from tm.junctions import JunctionFleet, JunctionGate
 
 __all__ = ["AuthorityReach", "AuthorityGate"]
@@ -318,10 +319,11 @@ class AuthorityGate(JunctionGate):
                     extra_z.append(int(z[j]))
                     extra_r.append(rw)
                 reach = max(reach, int(x[j]))
-        if extra_z:
+        if extra_z:  # without duplicates (a zone met by two chains of one row)
             wz, wr = np.r_[wz, extra_z].astype(np.intp), np.r_[wr, extra_r].astype(np.intp)
-            key = np.unique(wz * (int(wr.max()) + 1) + wr)
-            wz, wr = key // (int(wr.max()) + 1), key % (int(wr.max()) + 1)
+            m = int(wr.max()) + 1
+            key = np.unique(wz * m + wr)
+            wz, wr = key // m, key % m
         o = np.lexsort((wr, wz))
         return wz[o], wr[o]
 
@@ -348,9 +350,13 @@ class AuthorityGate(JunctionGate):
         if kept.any():
             cur_lo, cur_hi = fleet.claim_lo, fleet.claim_hi
             for z, r in zip(wz[kept].tolist(), wrow[kept].tolist()):
-                if not (np.all(cur_lo[r] <= self.hi[z]) and np.all(cur_hi[r] >= self.lo[z])):
+                if not self._in_guard(z, cur_lo[r], cur_hi[r]):
                     self.ahead.add((z, ids[r]))
         return allowed
+
+    def _in_guard(self, z: int, lo: np.ndarray, hi: np.ndarray) -> bool:
+        """Whether the box ``(lo, hi)`` (2,) meets zone ``z``'s guard (touching counts)."""
+        return boxes_meet(lo[None], hi[None], self.lo[z][None], self.hi[z][None])
 
     def _release(self, pos: dict, cur_lo: np.ndarray, cur_hi: np.ndarray) -> None:
         """:meth:`JunctionGate._release`, except the tokens :attr:`ahead`: kept until the holder's
@@ -361,7 +367,7 @@ class AuthorityGate(JunctionGate):
             i = pos.get(v, -1)
             if i < 0 or v not in self.holders[z]:
                 self.ahead.discard((z, v))
-            elif np.all(cur_lo[i] <= self.hi[z]) and np.all(cur_hi[i] >= self.lo[z]):
+            elif self._in_guard(z, cur_lo[i], cur_hi[i]):
                 self.ahead.discard((z, v))  # in the guard now: released as usual when it leaves
             else:
                 keep[(z, v)] = self.holders[z].pop(v)
