@@ -38,6 +38,7 @@ from bridge.sumo_pedestrians import read_personinfo, read_persons, walk_regions
 from bridge.waypoints import RouteError, load_net, trim_start, trim_start_index
 from controllers.classes import VehicleClass, VTypeParams, builtin_classes, vtype_class, vtype_speed_cap
 from controllers.tolerances import HOLD_TOL_M, HOLD_TOL_RAD, POSE_TOL_M
+from bridge.body_fleet import FleetBodies
 from bridge.sumo_body import BACK_M, RouteBody
 from tm.pedestrians import PedestrianRule, PedestrianSettings
 from tm.settings import TMSettings, default_check
@@ -71,6 +72,7 @@ class SumoWorld:
         self.routes = routes
         self.net = net  # NetGeometry: SUMO's lane shapes for the bodies (bridge.sumo_body)
         self._body: dict[str, RouteBody] = {}
+        self._fleet_bodies = FleetBodies()  # the same bodies, computed on together (bridge.body_fleet)
         self._sigma: dict[str, float] = {}  # vehicle -> arc position of its reference point
         self._pose: dict[str, tuple] = {}   # vehicle -> (front, angle, edge, lane) of this step
         self._pushed: dict[str, np.ndarray] = {}  # vehicles moved by the last push -> front sent
@@ -105,6 +107,7 @@ class SumoWorld:
         if b is None:
             pv = self.planned[vid]
             b = self._body[vid] = RouteBody(self.routes[vid], self.net, pv.length, pv.width)
+            self._fleet_bodies.add(vid, b)
         return b
 
     def body_leans(self, spec: VehicleSpec) -> np.ndarray | None:
@@ -153,31 +156,27 @@ class SumoWorld:
         return out
 
     def _poses(self, ids, centre):
-        """SUMO's bodies for reference points ``centre`` (see :mod:`bridge.sumo_body`); caches the
-        front, angle and lane of each for :meth:`push`."""
+        """SUMO's bodies for reference points ``centre`` (see :mod:`bridge.sumo_body`), all vehicles at
+        once (:class:`bridge.body_fleet.FleetBodies`); caches the front, angle and lane of each for
+        :meth:`push`."""
         self.pads_version += 1  # the windows of the claims' padding move with the reference points
-        polys = np.empty((len(ids), 4, 2))
-        for i, v in enumerate(ids):
-            b = self.route_body(v)
-            s0 = self._sigma.get(v)
-            sig, e = b.project(centre[i:i + 1], None if s0 is None else [s0])
-            front, back, lane, corners = b.bodies(sig, e)
-            sg = float(sig[0])
-            self._sigma[v] = sg
-            self.offset_max_m = max(self.offset_max_m, abs(float(e[0])))
-            t = self._pads.get(v)
-            if t is not None and abs(float(e[0])) > t.offset_max + 1e-9:  # off the padding's offsets
-                self.body_window_exits += 1
-            top = self._top.get(v, sg)
-            if sg < top - BACK_M:  # rolled back past the padding's window
-                self.body_window_exits += 1
-            self._top[v] = max(top, sg)
-            ax = front[0] - back[0]
-            ang = float(sumo_angle(np.arctan2(ax[1], ax[0])))
-            k = int(lane[0])
-            self._pose[v] = (front[0], ang, b.edge[k], b.index[k])
-            polys[i] = corners[0]
-        return polys
+        bodies = [self.route_body(v) for v in ids]
+        around = np.array([self._sigma.get(v, np.nan) for v in ids], dtype=float)
+        sig, e = self._fleet_bodies.project(ids, centre, around)
+        front, back, lane, corners = self._fleet_bodies.bodies(ids, sig, e)
+        self._sigma.update(zip(ids, sig.tolist()))
+        off = np.abs(e)
+        self.offset_max_m = max(self.offset_max_m, float(off.max(initial=0.0)))
+        cap = np.array([t.offset_max if (t := self._pads.get(v)) is not None else np.inf for v in ids])
+        self.body_window_exits += int(np.sum(off > cap + 1e-9))  # off the padding's offsets
+        top = np.array([self._top.get(v, s) for v, s in zip(ids, sig.tolist())], dtype=float)
+        self.body_window_exits += int(np.sum(sig < top - BACK_M))  # rolled back past the padding's window
+        self._top.update(zip(ids, np.maximum(top, sig).tolist()))
+        ax = front - back
+        ang = sumo_angle(np.arctan2(ax[:, 1], ax[:, 0])).tolist()
+        for v, b, f, a, k in zip(ids, bodies, front, ang, lane.tolist()):
+            self._pose[v] = (f, a, b.edge[k], b.index[k])
+        return corners
 
     def bodies(self, ids, centre, heading, length, width) -> np.ndarray | None:
         """The bodies SUMO will judge after the next push of these reference points (``(V, 4, 2)``,
@@ -251,6 +250,7 @@ class SumoWorld:
         self._held.discard(vid)
         self._sigma.pop(vid, None)
         self._body.pop(vid, None)
+        self._fleet_bodies.remove(vid)
         self._pads.pop(vid, None)
         self._top.pop(vid, None)
         if vid in self._sumo_arrived:  # SUMO ended the trip itself (its front at the route's end)

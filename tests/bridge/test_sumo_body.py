@@ -10,7 +10,7 @@ its lanes.  These tests pin the replacement down against real SUMO.
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings, strategies as st
+from hypothesis import HealthCheck, assume, given, settings, strategies as st
 
 from bridge.demand import PlannedVehicle
 from bridge.groups import _headings
@@ -343,8 +343,14 @@ def test_leans_are_the_lane_s_direction_on_a_lane_change_and_0_elsewhere(net):
 def test_leaning_claims_cover_sumo_s_body_on_a_lane_change(net, frac, lat, size):
     """End to end on a lane change: a leaning path frame (the route's :meth:`RouteBody.leans`), the
     padding measured from rectangles along the bodies' headings (``PadTable`` with them), and the
-    cover of a one-point interval at the reference point (:func:`tm.path_cover.stack_box_cover`
-    with the padding): SUMO's body lies in the cover.  Tolerance 1e-9 m, as above."""
+    cover of a one-point interval at the plant's path coordinates (:func:`tm.path_cover.stack_box_cover`
+    with the padding): SUMO's body lies in the cover.  The positions are drawn as the loop has them:
+    path coordinates ``(s, n)`` (the plant's state), their world point, and SUMO's body of that point
+    (its arc position and offset on the route polyline).  Drawing a polyline point and mapping it to
+    path coordinates instead is not the loop's map: beside a kink of the waypoints' chords a point
+    projects onto the vertex and ``to_world`` of its coordinates is another point (0.1 m away at
+    1.5 m off a 4.6 degree kink), so its body need not lie in that cover.  Offsets beyond the
+    padding's (``body_window_exits`` counts them) are not drawn.  Tolerance 1e-9 m, as above."""
     from controllers.path import PathFrame, PathStack
     from tm.path_cover import points_in_boxes, stack_box_cover
     r, b = _lane_change(net, size)
@@ -358,14 +364,16 @@ def test_leaning_claims_cover_sumo_s_body_on_a_lane_change(net, frac, lat, size)
     table = b.pad_table(arc, W, H, box_lo, box_hi, frame="path")
     diag = np.flatnonzero(~b.seg_on)[0]
     a0, a1 = b.parc[diag] - 5.0, b.parc[diag + 1] + 5.0  # the diagonal and 5 m either side
-    sigma = a0 + frac * (a1 - a0)
-    k = int(np.searchsorted(arc, sigma, side="left"))
-    e = lat * box_hi[1]
-    _, _, _, corners = b.bodies(np.array([sigma]), np.array([e]))
-    q, t, _ = _at(b.poly, b.parc, np.array([sigma]))
-    p = q[0] + e * np.array([-t[0, 1], t[0, 0]])
-    s_p, n_p = f.to_path(p[None], [S[k]], window=5.0)
-    pad = table.pads(k, sigma - 0.1)
+    ends = _at(b.poly, b.parc, np.array([a0, a1]))[0]
+    s_a, s_b = f.to_path(ends, np.interp([a0, a1], arc, S), window=5.0)[0]
+    s_p = np.array([s_a + frac * (s_b - s_a)])
+    n_p = np.array([lat * box_hi[1]])
+    p, _ = f.to_world(s_p, n_p)
+    sig, e = b.project(p, np.interp(s_p, S, arc), 5.0, 5.0)
+    assume(abs(float(e[0])) <= table.offset_max)
+    k = int(np.searchsorted(S, s_p[0], side="left"))
+    _, _, _, corners = b.bodies(sig, e)
+    pad = table.pads(k, float(sig[0]) - 0.1)
     boxes = stack_box_cover(PathStack([f]), 0, s_p, s_p, n_p, n_p, size[0] / 2 + pad[0], size[0] / 2 + pad[1],
                             size[1] / 2 + pad[2], size[1] / 2 + pad[3])
     assert points_in_boxes(boxes, [0], corners, 1e-9).any()
