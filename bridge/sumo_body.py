@@ -66,6 +66,9 @@ BACK_M = 0.5
 #: edge; a steeper join is a gap in the network's geometry, left without a lean.
 LEAN_MAX_RAD = float(np.deg2rad(30.0))
 
+#: Rows per call of the windowed projection in :meth:`RouteBody.project_along` (bounds its arrays).
+_PROJECT_CHUNK = 256
+
 #: SUMO's POSITION_EPS (m): the least shape length MSLane's length-geometry factor takes.
 _POSITION_EPS = 0.1
 
@@ -225,23 +228,41 @@ class RouteBody:
         corners = np.stack([front - side, front + side, back + side, back - side], axis=1)  # CCW, as tm.geometry
         return front, back, lane, corners
 
-    def leans(self, W) -> np.ndarray:
+    def project_along(self, P, hint=None, back: float = 1.0, ahead: float = 10.0) -> np.ndarray:
+        """Arc positions of points ``P`` (m, 2) met in order along the route (waypoints, their chords'
+        middles): each searched within ``[s - back, s + ahead]`` of the one before (the first on the
+        whole route), so a route that passes near itself is not confused.  With ``hint`` (m,), each
+        point's approximate arc position (within ``back`` above and ``ahead`` below the true one), all are
+        searched at once within ``[hint - back, hint + ahead]``."""
+        P = np.asarray(P, dtype=float).reshape(-1, 2)
+        if hint is None:
+            out, s = np.empty(len(P)), None
+            for j in range(len(P)):
+                out[j] = float(self.project(P[j:j + 1], None if s is None else [s], back, ahead)[0][0])
+                s = out[j]
+            return out
+        h = np.asarray(hint, dtype=float).reshape(-1)
+        out = np.empty(len(P))
+        for a in range(0, len(P), _PROJECT_CHUNK):  # (rows x segments) arrays: in chunks
+            b = min(a + _PROJECT_CHUNK, len(P))
+            out[a:b] = _project(self.poly, self.parc, P[a:b], h[a:b] - back, h[a:b] + ahead)[0]
+        return out
+
+    def leans(self, W, arcs=None) -> np.ndarray:
         """Body lean (rad) of each chord ``W[j] -> W[j + 1]`` of the route's waypoints ``W`` (P, 2),
         for :class:`controllers.path.PathFrame`: where the chord's middle lies on a polyline segment
         off the lanes (a lane change's diagonal), the angle from the chord to SUMO's body there
         (front minus back at offset 0: the lane's direction); 0 elsewhere, and where that angle
-        exceeds :data:`LEAN_MAX_RAD` (a gap join, not a lane change)."""
+        exceeds :data:`LEAN_MAX_RAD` (a gap join, not a lane change).  ``arcs`` (P,): the waypoints'
+        arc positions on the route (:meth:`project_along`), when known."""
         W = np.asarray(W, dtype=float)
         out = np.zeros(max(len(W) - 1, 0))
         if len(W) < 2 or self.seg_on.all():
             return out
         d = np.diff(W, axis=0)
         mid = W[:-1] + 0.5 * d
-        sig = np.empty(len(mid))
-        s = None
-        for j in range(len(mid)):  # in order: a route may pass near itself
-            sig[j] = float(self.project(mid[j:j + 1], None if s is None else [s], 1.0, 10.0)[0][0])
-            s = sig[j]
+        hint = None if arcs is None else 0.5 * (np.asarray(arcs, dtype=float)[:-1] + np.asarray(arcs, dtype=float)[1:])
+        sig = self.project_along(mid, hint)
         seg = np.clip(np.searchsorted(self.parc, sig, side="right") - 1, 0, len(self.seg_on) - 1)
         off = np.flatnonzero(~self.seg_on[seg] & (np.hypot(d[:, 0], d[:, 1]) > 0))
         if len(off):
@@ -304,6 +325,7 @@ class PadTable:
         self.offset_max = e_max
         n = int(np.ceil(body.route_length / SAMPLE_M)) + 1
         self.sig = np.linspace(0.0, body.route_length, n)
+        self._step = float(self.sig[1]) if n > 1 else 0.0
         q, t, _ = _at(body.poly, body.parc, self.sig)
         nrm = np.column_stack([-t[:, 1], t[:, 0]])
         rel, ref = [], []
@@ -362,7 +384,18 @@ class PadTable:
         (the step term covers only the smooth part): the first sample past ``sigma_lo`` alone missed
         the body of the one before (a truck at the window start before a left turn, 1.5 m off the
         route: 0.11 m outside its padded rectangle, ``tests/bridge/test_sumo_body.py``)."""
-        return max(int(np.searchsorted(self.sig, sigma_lo, side="right")) - 1, 0)
+        # the samples are a linspace (sig[j] = j * step): an index from the quotient, corrected
+        # against the samples themselves (what searchsorted(sig, sigma_lo, "right") - 1 gives)
+        sig, last = self.sig, len(self.sig) - 1
+        q = sigma_lo / self._step if self._step > 0 else 0.0
+        if q != q:  # NaN sorts last
+            return last
+        j = int(min(max(q, 0.0), last))
+        while j < last and sig[j + 1] <= sigma_lo:
+            j += 1
+        while j > 0 and sig[j] > sigma_lo:
+            j -= 1
+        return j
 
     def _table(self, k: int, j_base: int) -> tuple[int, np.ndarray]:
         """Pads of waypoint ``k`` for every window start ``j0 >= j_base``: row ``j0 - j_base`` is

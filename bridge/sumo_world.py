@@ -77,6 +77,7 @@ class SumoWorld:
         self._pose: dict[str, tuple] = {}   # vehicle -> (front, angle, edge, lane) of this step
         self._pushed: dict[str, np.ndarray] = {}  # vehicles moved by the last push -> front sent
         self._pads: dict = {}               # vehicle -> PadTable (claims' padding)
+        self._arcs: dict[str, np.ndarray] = {}  # vehicle -> its waypoints' arc positions on its route
         self._top: dict[str, float] = {}    # vehicle -> furthest arc position reached
         #: changes whenever claim_pads may answer differently for the same vehicles and waypoints
         #: (bodies placed: windows moved; a route's padding registered): bridge.pad_memo keeps answers
@@ -116,7 +117,24 @@ class SumoWorld:
         network's geometry."""
         if self.net is None:
             return None
-        return self.route_body(spec.id).leans(spec.waypoints)
+        return self.route_body(spec.id).leans(spec.waypoints, self._waypoint_arcs(spec))
+
+    def _waypoint_arcs(self, spec: VehicleSpec) -> np.ndarray:
+        """Arc positions of ``spec``'s waypoints on its route polyline (kept per vehicle).  The
+        waypoints are the route's from some point on (``trim_start``: a first point on the polyline,
+        then the route's own), whose arc positions the route knows: they are the search's hints
+        (:meth:`RouteBody.project_along`); other waypoints are searched one after the other."""
+        got = self._arcs.get(spec.id)
+        if got is None:
+            W = np.asarray(spec.waypoints, dtype=float)
+            r = self.routes[spec.id]
+            RW, RA = np.asarray(r.waypoints, dtype=float), np.asarray(r.arc_length, dtype=float)
+            m = len(RW) - (len(W) - 1)
+            hint = None
+            if len(W) >= 2 and 1 <= m < len(RW) and np.array_equal(W[1:], RW[m:]):
+                hint = np.concatenate([[RA[m] - float(np.hypot(*(W[1] - W[0])))], RA[m:]])
+            got = self._arcs[spec.id] = self.route_body(spec.id).project_along(W, hint)
+        return got
 
     def register_pads(self, spec: VehicleSpec, box_lo, box_hi, frame: str = "road",
                       headings=None) -> np.ndarray | None:
@@ -131,11 +149,7 @@ class SumoWorld:
         if t is None:
             b = self.route_body(spec.id)
             W = np.asarray(spec.waypoints, dtype=float)
-            arc = np.empty(len(W))
-            s = None
-            for k in range(len(W)):  # in order: a route may pass near itself
-                arc[k] = float(b.project(W[k:k + 1], None if s is None else [s], 1.0, 10.0)[0][0])
-                s = arc[k]
+            arc = self._waypoint_arcs(spec)
             H = spec_headings(W) if headings is None else np.asarray(headings, dtype=float)
             t = self._pads[spec.id] = b.pad_table(arc, W, H, box_lo, box_hi, frame)
             self.pads_version += 1
@@ -148,12 +162,13 @@ class SumoWorld:
         network's geometry."""
         if self.net is None:
             return None
-        out = np.zeros((len(ids), 4))
-        for i, (v, kk) in enumerate(zip(ids, np.asarray(k).tolist())):
-            t = self._pads.get(v)
-            if t is not None:
-                out[i] = t.pads(kk, self._top.get(v, t.arc_k[0]) - BACK_M)
-        return out
+        zero = np.zeros(4)
+        rows = []
+        pads, top = self._pads, self._top
+        for v, kk in zip(ids, np.asarray(k).reshape(-1).tolist()):
+            t = pads.get(v)
+            rows.append(zero if t is None else t.pads(kk, top.get(v, t.arc_k[0]) - BACK_M))
+        return np.array(rows, dtype=float).reshape(len(rows), 4)
 
     def _poses(self, ids, centre):
         """SUMO's bodies for reference points ``centre`` (see :mod:`bridge.sumo_body`), all vehicles at
@@ -252,6 +267,7 @@ class SumoWorld:
         self._body.pop(vid, None)
         self._fleet_bodies.remove(vid)
         self._pads.pop(vid, None)
+        self._arcs.pop(vid, None)
         self._top.pop(vid, None)
         if vid in self._sumo_arrived:  # SUMO ended the trip itself (its front at the route's end)
             self._sumo_arrived.discard(vid)

@@ -94,3 +94,48 @@ def test_fleet_bodies_refuse_an_unknown_vehicle(grid_net):
     fleet.add("a", RouteBody(_walks(net, np.random.default_rng(1), 1)[0], net, 5.0, 1.8))
     with pytest.raises(KeyError, match="'b' has no body"):
         fleet.bodies(["a", "b"], np.zeros(2), np.zeros(2))
+
+
+@pytest.mark.parametrize("which", ["grid6", "grid"])
+def test_project_along_with_hints_is_the_sequential_search(which, grid_net):
+    """The waypoints' arc positions searched all at once around hints (the route's own arc positions,
+    as SumoWorld gives them) are those of the search one waypoint after the other, and the route's;
+    so are the chords' middles (RouteBody.leans) and the leans themselves.  Tolerance 1e-9 m."""
+    net = load_net(_grid6() if which == "grid6" else grid_net)
+    for r in _walks(net, np.random.default_rng(11), 12):
+        b = RouteBody(r, net, 5.0, 1.8)
+        W, A = np.asarray(r.waypoints), np.asarray(r.arc_length)
+        seq = b.project_along(W)
+        np.testing.assert_allclose(b.project_along(W, A), seq, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(seq, A, rtol=0, atol=1e-6)
+        mid = W[:-1] + 0.5 * np.diff(W, axis=0)
+        np.testing.assert_allclose(b.project_along(mid, 0.5 * (A[:-1] + A[1:])), b.project_along(mid),
+                                   rtol=0, atol=1e-9)
+        np.testing.assert_array_equal(b.leans(W, A), b.leans(W))
+
+
+def test_world_waypoint_arcs_of_trimmed_routes(grid_net):
+    """SumoWorld's waypoint arcs (hints from the route when the waypoints are its tail, as
+    ``trim_start`` makes them) are the one-after-the-other search's, trimmed or not, and for
+    waypoints that are not the route's (no hints) too.  Tolerance 1e-9 m."""
+    from bridge.cosim import VehicleSpec
+    from bridge.demand import PlannedVehicle
+    from bridge.sumo_world import SumoWorld
+    from bridge.waypoints import trim_start
+
+    net = load_net(grid_net)
+    routes = _walks(net, np.random.default_rng(4), 6)
+    planned = {f"v{i}": PlannedVehicle(f"v{i}", "car", 0.0, r.edges, None, None, "passenger", 5.0, 1.8)
+               for i, r in enumerate(routes)}
+    w = SumoWorld(None, planned, {f"v{i}": r for i, r in enumerate(routes)}, net=net)
+    for i, r in enumerate(routes):
+        vid = f"v{i}"
+        for s0 in (0.0, 3.25, 0.3 * r.length_m):
+            W = trim_start(r, s0)
+            w._arcs.pop(vid, None)
+            got = w._waypoint_arcs(VehicleSpec(vid, "car", W))
+            np.testing.assert_allclose(got, w.route_body(vid).project_along(W), rtol=0, atol=1e-9)
+        W = np.asarray(r.waypoints)[::2]  # not the route's tail: searched in order
+        w._arcs.pop(vid, None)
+        np.testing.assert_allclose(w._waypoint_arcs(VehicleSpec(vid, "car", W)),
+                                   w.route_body(vid).project_along(W), rtol=0, atol=1e-9)

@@ -175,6 +175,23 @@ def test_padding_tables_are_the_reference_pads(net, edges):
             np.testing.assert_array_equal(table.pads(k, sg), table._pads(k, j0), err_msg=f"k={k} sigma={sg}")
 
 
+def test_window_start_is_the_last_sample_at_or_before(net):
+    """``PadTable.window_start`` (an index from the samples' spacing, corrected against the samples)
+    is ``searchsorted(sig, sigma, "right") - 1`` clipped at 0 for every arc position: random ones,
+    each sample itself and the floats just either side of it, and beyond both ends."""
+    r = _route(net, LEFT)
+    table = RouteBody(r, net, *TRUCK).pad_table(r.arc_length, r.waypoints, _headings(r.waypoints),
+                                                (-40.0, -OFFSET_MAX_M), (1.2, OFFSET_MAX_M))
+    sig = table.sig
+    rng = np.random.default_rng(5)
+    pick = sig[rng.integers(0, len(sig), 300)]
+    xs = np.concatenate([rng.uniform(-5.0, sig[-1] + 5.0, 300), pick, np.nextafter(pick, -np.inf),
+                         np.nextafter(pick, np.inf), [sig[-1], -np.inf, np.inf, np.nan]])
+    want = np.maximum(np.searchsorted(sig, xs, side="right") - 1, 0)
+    got = np.array([table.window_start(x) for x in xs])
+    np.testing.assert_array_equal(got, want)
+
+
 def _planned(vid, edges):
     return PlannedVehicle(vid, "truck", 0.0, tuple(edges), None, None, "truck", *TRUCK)
 
