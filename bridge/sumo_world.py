@@ -121,18 +121,20 @@ class SumoWorld:
 
     def _waypoint_arcs(self, spec: VehicleSpec) -> np.ndarray:
         """Arc positions of ``spec``'s waypoints on its route polyline (kept per vehicle).  The
-        waypoints are the route's from some point on (``trim_start``: a first point on the polyline,
-        then the route's own), whose arc positions the route knows: they are the search's hints
+        waypoints are a run of the route's after a first point on the polyline (``trim_start``, and
+        in authority mode cut before the route's end), whose arc positions the route knows: the search's hints
         (:meth:`RouteBody.project_along`); other waypoints are searched one after the other."""
         got = self._arcs.get(spec.id)
         if got is None:
             W = np.asarray(spec.waypoints, dtype=float)
             r = self.routes[spec.id]
             RW, RA = np.asarray(r.waypoints, dtype=float), np.asarray(r.arc_length, dtype=float)
-            m = len(RW) - (len(W) - 1)
             hint = None
-            if len(W) >= 2 and 1 <= m < len(RW) and np.array_equal(W[1:], RW[m:]):
-                hint = np.concatenate([[RA[m] - float(np.hypot(*(W[1] - W[0])))], RA[m:]])
+            n = len(W) - 1
+            for m in (np.flatnonzero((RW == W[1]).all(axis=1)).tolist() if len(W) >= 2 else []):
+                if m + n <= len(RW) and np.array_equal(W[1:], RW[m:m + n]):
+                    hint = np.concatenate([[RA[m] - float(np.hypot(*(W[1] - W[0])))], RA[m:m + n]])
+                    break
             got = self._arcs[spec.id] = self.route_body(spec.id).project_along(W, hint)
         return got
 

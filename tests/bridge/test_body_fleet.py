@@ -114,7 +114,7 @@ def test_project_along_with_hints_is_the_sequential_search(which, grid_net):
         np.testing.assert_array_equal(b.leans(W, A), b.leans(W))
 
 
-def test_world_waypoint_arcs_of_trimmed_routes(grid_net):
+def test_world_waypoint_arcs_of_trimmed_routes(grid_net, monkeypatch):
     """SumoWorld's waypoint arcs (hints from the route when the waypoints are its tail, as
     ``trim_start`` makes them) are the one-after-the-other search's, trimmed or not, and for
     waypoints that are not the route's (no hints) too.  Tolerance 1e-9 m."""
@@ -130,8 +130,13 @@ def test_world_waypoint_arcs_of_trimmed_routes(grid_net):
     w = SumoWorld(None, planned, {f"v{i}": r for i, r in enumerate(routes)}, net=net)
     for i, r in enumerate(routes):
         vid = f"v{i}"
-        for s0 in (0.0, 3.25, 0.3 * r.length_m):
+        for s0, cut in ((0.0, 0), (3.25, 0), (0.3 * r.length_m, 0), (3.25, 2)):
             W = trim_start(r, s0)
+            W = W[:len(W) - cut]  # authority mode stops short of the route's end
+            w._arcs.pop(vid, None)
+            with monkeypatch.context() as mp:  # the route's run of waypoints: searched at once, no sequence
+                mp.setattr(RouteBody, "project", lambda *a, **k: pytest.fail("searched one by one"))
+                w._waypoint_arcs(VehicleSpec(vid, "car", W))
             w._arcs.pop(vid, None)
             got = w._waypoint_arcs(VehicleSpec(vid, "car", W))
             np.testing.assert_allclose(got, w.route_body(vid).project_along(W), rtol=0, atol=1e-9)
