@@ -41,8 +41,9 @@ from bridge.groups import _Group, _headings
 from bridge.pad_memo import PadMemo
 from bridge.path_fleet import FRAMES, PathFleet
 from controllers.synthesis import synthesize
+from controllers.tolerances import GEOMETRY_TOL
 from tm.claims import Claims
-from tm.reach import ReachClaims, world_aabb
+from tm.reach import ReachClaims, candidate_pairs, world_aabb
 from tm.reach_book import ReachBook, admit_reach, footprint_claims
 from tm.authority_gate import AuthorityGate, AuthorityReach
 from tm.reach_cache import ClaimCache
@@ -301,6 +302,7 @@ class Cosim:
                 c: ClassReach.of(f.position_sets, self.classes[c].length, self.classes[c].width,
                                  self.classes[c].model.frame == "road") for c, f in self.families.items()})
         self._claims_now: ReachClaims | None = None  # authority: this step's claims before the decision
+        self._in_force: tuple | None = None  # authority: (step, ids, claims in force after its decision)
         self._junction_fleet: JunctionFleet | None = None  # this step's fleet as the junction gate saw it
         #: authority mode with pedestrians: stop points never rest on a crossing they cannot clear
         #: (``crossings``: the crossing regions; tm.crossing_gate)
@@ -548,8 +550,8 @@ class Cosim:
         fn = getattr(self.world, "claim_pads", None) if self.authority else None
         pads = None
         if fn is not None:  # the claims' body padding along a route (SUMO: bridge.sumo_body)
-            def pads(row, idx, ids=state.ids):
-                p = fn([ids[row]] * len(idx), idx)
+            def pads(rows, idx, ids=state.ids):
+                p = fn([ids[r] for r in rows.tolist()], idx)
                 return np.zeros((len(idx), 4)) if p is None else p
         fleet = JunctionFleet(state.ids, state.family, cur_lo, cur_hi,
                               tuple((g.W, g.H, g.k) for g in self.groups.values() if g.ids), pads)
@@ -595,14 +597,21 @@ class Cosim:
 
         return float(self.reach.models[vclass].tables.p_hi[0]) + AHEAD_M
 
-    def _reach_claims(self, requests: FleetState | None = None) -> ReachClaims:
+    def _reach_claims(self, requests: FleetState | None = None, rows: np.ndarray | None = None) -> ReachClaims:
         """Reach claims (authority mode) of every vehicle for its current waypoint, in fleet order;
-        with ``requests``: of its requesters for their requested waypoints."""
+        with ``requests``: of its requesters for their requested waypoints; with ``rows`` (bool, fleet
+        order): of those vehicles only, for their current waypoints."""
         parts, o = [], 0
         for c, g in self.groups.items():
             if not g.ids:
                 continue
-            if requests is None:
+            if requests is None and rows is not None:
+                r = np.asarray(rows[o:o + len(g.ids)], dtype=bool)
+                if r.any():
+                    cen, hd, _ = g.centres()
+                    parts.append((c, g.X[r], cen[r], hd[r], g.l[r], self._group_pads(g)[r],
+                                  self._place(g, 0, np.flatnonzero(r))))
+            elif requests is None:
                 cen, hd, _ = g.centres()
                 parts.append((c, g.X, cen, hd, g.l, self._group_pads(g), self._place(g)))
             else:
@@ -699,6 +708,7 @@ class Cosim:
                 dec = self.tm.decide(state)
             ms_decide = (time.perf_counter() - td) * 1e3
             self.last_decision = dec
+            self._in_force = (self.t, state.ids, dec.claims) if self.authority else None
             ms_tm = (time.perf_counter() - tt) * 1e3
             n_req, n_go = int(state.requesting.sum()), int(dec.go.sum())
             # 3a. switch on Go (k <- k + 1, l <- l'); denials counted
@@ -753,9 +763,10 @@ class Cosim:
         if self.authority and state is not None:  # 4a. x(t+1) inside S_1(t) (tube escapes counted)
             live = [g for g in self.groups.values() if g.ids]
             pos, body = self._poses()
-            self.monitor.escapes(dec.claims, pos, state.length, state.width,
-                                 pad=np.vstack([self._group_pads(g) for g in live]),
-                                 body_heading=None if self.paths is None else body)
+            if self.monitor.escapes(dec.claims, pos, state.length, state.width,
+                                    pad=np.vstack([self._group_pads(g) for g in live]),
+                                    body_heading=None if self.paths is None else body):
+                self._in_force = None  # claims from x(t+1) need not lie in the shifted ones (_near_rows)
             for c, g in self.groups.items():  # positions past the stretch the body padding covers
                 if not g.ids:
                     continue
@@ -878,13 +889,13 @@ class Cosim:
                              index=np.minimum(cur.index + 1, top), heading=cur.heading, length=cur.length,
                              width=cur.width)
         if self.authority:  # the others' reach claims and their footprints now (condition (12))
-            now = self._reach_claims() if len(cur.ids) else None
+            entry = self._entry_claims(ready, cand, with_index=True)
+            now = self._reach_claims(rows=self._near_rows(cur.ids, entry[0])) if len(cur.ids) else None
             pos, body = self._poses() if now is not None else (None, None)
             body = cur.heading if self.paths is None else body
             pads = np.vstack([self._group_pads(g) for g in self.groups.values() if g.ids]) if now is not None else None
             now = ReachClaims.concat(now, footprint_claims(pos, body, cur.length, cur.width, pad=pads)) \
                 if now is not None else footprint_claims(np.zeros((0, 2)), [], [], [])
-            entry = self._entry_claims(ready, cand, with_index=True)
             ok = admit_reach(now, entry[0], self.settings.tm.check)
         else:
             ok = self.tm.admit(cur, cand)
@@ -923,6 +934,32 @@ class Cosim:
             keep = [i for i, a in enumerate(ok) if not a] + list(range(n_ready, len(self.pending)))
             self.pending = [self.pending[i] for i in keep]
         return n
+
+    def _near_rows(self, ids: list, entry: ReachClaims) -> np.ndarray | None:
+        """The vehicles (bool, fleet order ``ids``) whose claims now may meet the entry claims
+        ``entry``: those whose claims in force after this step's decision do (world boxes of all
+        their slots within twice GEOMETRY_TOL).  Their claims from ``x(t+1)`` lie in those
+        (``S_k(t+1) ⊆ S_{k+1}(t)``: the reach nests, the index drops, the padding only shrinks as its
+        window moves on), so the others' cannot meet ``entry`` and admission decides alike without
+        them.  None (every vehicle) when that does not hold: no decision this step, a vehicle not in
+        it, or a tube escape (:meth:`step`, 4a)."""
+        f = self._in_force
+        if f is None or f[0] != self.t - 1:
+            return None
+        pos = {v: i for i, v in enumerate(f[1])}
+        idx = [pos.get(v) for v in ids]
+        if any(i is None for i in idx):
+            return None
+        lo, hi = world_aabb(f[2])
+        idx = np.asarray(idx, dtype=np.intp)
+        elo, ehi = world_aabb(entry)
+        _, j = candidate_pairs(elo, ehi, lo[idx], hi[idx], 2.0 * GEOMETRY_TOL)
+        near = np.zeros(len(ids), dtype=bool)
+        near[j] = True
+        # the inclusion needs the waypoint the claims in force were built for: any other, fresh
+        cen = np.vstack([g.world_centres()[0] for g in self.groups.values() if g.ids])
+        near |= ~np.all(cen == f[2].centre[idx], axis=1)
+        return near
 
     def _flush(self, g: _Group, mask=None) -> None:
         """Move the group's per-vehicle accumulators (rows ``mask``) into the records."""

@@ -556,14 +556,9 @@ class AuthorityGate(JunctionGate):
                 near = near[(near != row) & out[near]]
                 co = set(pos[v] for v in hs if v in pos)
                 withheld = []
-                for j in near.tolist():
-                    Wj, Hj, kj = fleet.route(j)
-                    idx = np.array([kj, min(kj + 1, len(Wj) - 1)])
-                    b_lo, b_hi = self.classes[fleet.family[j]].hold_box(fleet.pad(j, idx), Hj[idx],
-                                                                       Hj[np.minimum(idx + 1, len(Hj) - 1)])
-                    b_lo, b_hi = Wj[idx] + b_lo, Wj[idx] + b_hi
-                    # (2, m): the standing boxes now and asked for against each box of the path
-                    hit = np.all((b_lo[:, None, :] <= hi[None]) & (b_hi[:, None, :] >= lo[None]), axis=2)
+                hits = self._standing_hits(fleet, near, lo, hi)
+                for j, hit in zip(near.tolist(), hits):
+                    # hit (2, m): the standing boxes now and asked for against each box of the path
                     if not hit[1].any():  # the asked-for box misses the whole path
                         continue
                     if self._on_route(fleet, row, np.array([j]), ahead=1)[0]:
@@ -577,6 +572,30 @@ class AuthorityGate(JunctionGate):
                     self.requests_withheld += len(withheld)
                     self.wide_withheld += len(withheld)
         return out
+
+    def _standing_hits(self, fleet: JunctionFleet, rows: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+        """For each of ``rows``: which of the boxes ``lo, hi`` (m, 2) its standing boxes (padded
+        :meth:`AuthorityReach.hold_box`) at its stop point and at the next waypoint meet, (n, 2, m)."""
+        n = len(rows)
+        if not n:
+            return np.zeros((0, 2, len(lo)), dtype=bool)
+        routes = [fleet.route(j) for j in rows.tolist()]
+        k = np.array([r[2] for r in routes], dtype=np.intp)
+        last = np.array([len(r[0]) - 1 for r in routes], dtype=np.intp)
+        idx = np.stack([k, np.minimum(k + 1, last)], axis=1)               # (n, 2)
+        nxt = np.minimum(idx + 1, last[:, None])
+        Wp = np.stack([r[0][i] for r, i in zip(routes, idx)])            # (n, 2, 2)
+        Ha = np.stack([r[1][i] for r, i in zip(routes, idx)]).ravel()    # (2n,)
+        Hb = np.stack([r[1][i] for r, i in zip(routes, nxt)]).ravel()
+        pad = fleet.pad_rows(np.repeat(rows, 2), idx.ravel())
+        b_lo, b_hi = np.empty((2 * n, 2)), np.empty((2 * n, 2))
+        fam = np.repeat(np.asarray(fleet.family)[rows], 2)
+        for c in np.unique(fam).tolist():
+            m = fam == c
+            b_lo[m], b_hi[m] = self.classes[c].hold_box(pad[m], Ha[m], Hb[m])
+        b_lo = Wp + b_lo.reshape(n, 2, 2)
+        b_hi = Wp + b_hi.reshape(n, 2, 2)
+        return np.all((b_lo[:, :, None, :] <= hi[None, None]) & (b_hi[:, :, None, :] >= lo[None, None]), axis=3)
 
     def route_through(self, fleet: JunctionFleet, row: int, z: int):
         """``(key, slot, lo, hi)``: exit slot and corridor of row ``row`` through zone ``z``'s guard.

@@ -125,9 +125,10 @@ class JunctionFleet:
         waypoints ``(K, 2)``, the headings of the segments arriving at them ``(K,)``, and
         the current waypoint index of each of its rows.
     pads : callable or None
-        ``pads(row, idx)``: the one-sided padding ``(back, front, right, left)`` (m,
-        shape (m, 4)) the claims of row ``row`` add to its footprint at its route's waypoints
-        ``idx`` (SUMO's bodies, :mod:`bridge.sumo_body`); None: no padding.
+        ``pads(rows, idx)``: the one-sided padding ``(back, front, right, left)`` (m, shape
+        (m, 4)) the claims of fleet row ``rows[i]`` add to its footprint at its route's waypoint
+        ``idx[i]`` (``rows``, ``idx`` int arrays (m,); SUMO's bodies, :mod:`bridge.sumo_body`);
+        None: no padding.
     """
 
     ids: list
@@ -141,11 +142,19 @@ class JunctionFleet:
         """The padding (m, 4) ``(back, front, right, left)`` of row ``row`` at waypoints ``idx``
         (zeros without :attr:`pads`)."""
         idx = np.asarray(idx, dtype=np.intp).reshape(-1)
+        return self.pad_rows(np.full(len(idx), row, dtype=np.intp), idx)
+
+    def pad_rows(self, rows: np.ndarray, idx: np.ndarray) -> np.ndarray:
+        """The padding (m, 4) of rows ``rows[i]`` at their waypoints ``idx[i]`` (zeros without
+        :attr:`pads`)."""
+        rows = np.asarray(rows, dtype=np.intp).reshape(-1)
+        idx = np.asarray(idx, dtype=np.intp).reshape(-1)
         if self.pads is None or not len(idx):
             return np.zeros((len(idx), 4))
-        p = np.asarray(self.pads(row, idx), dtype=float)
+        p = np.asarray(self.pads(rows, idx), dtype=float)
         if p.shape != (len(idx), 4) or not np.all(np.isfinite(p) & (p >= 0)):
-            raise ValueError(f"JunctionFleet.pads: vehicle {self.ids[row]!r}: need finite pads >= 0 of shape "
+            bad = sorted({self.ids[r] for r in rows.tolist()})
+            raise ValueError(f"JunctionFleet.pads: vehicle(s) {bad}: need finite pads >= 0 of shape "
                              f"({len(idx)}, 4), got shape {p.shape}")
         return p
 

@@ -133,27 +133,17 @@ class SlotBoxes:
         ey = s * self.half[:, 0] + c * self.half[:, 1]
         cnt = self.count.ravel()
         has = np.flatnonzero(cnt > 0)
-        at = self.start.ravel()[has]
-        # slots' boxes are contiguous but not ordered across slots: reduce each slot's run
-        order = np.argsort(at, kind="stable")
-        at_o, has_o = at[order], has[order]
-        ends = at_o + cnt[has_o]
-        if len(at_o) and np.all(at_o[1:] >= ends[:-1]):  # runs do not overlap: one reduceat
-            idx = np.empty(2 * len(at_o), dtype=np.intp)
-            idx[0::2], idx[1::2] = at_o, ends
-            vals = []
-            for v in (self.centre[:, 0] - ex, self.centre[:, 0] + ex, self.centre[:, 1] - ey, self.centre[:, 1] + ey):
-                vals.append(np.append(v, 0.0))
-            red = [np.minimum.reduceat(vals[0], idx)[0::2], np.maximum.reduceat(vals[1], idx)[0::2],
-                   np.minimum.reduceat(vals[2], idx)[0::2], np.maximum.reduceat(vals[3], idx)[0::2]]
-            for p in range(4):
-                out[p].reshape(-1)[has_o] = red[p]
+        if not len(has):
             return out
-        owner = np.repeat(has, cnt[has])
-        src = np.repeat(self.start.ravel()[has] - (np.cumsum(cnt[has]) - cnt[has]), cnt[has]) + np.arange(len(owner))
+        # each slot's boxes are one run [start, start + count): reduceat over the pairs (start, end)
+        # reduces exactly that run whatever the runs' order or overlap (shifted and padded slots
+        # share boxes); the odd pairs (end, next start) are ignored, a sentinel keeps ends in range
+        at = self.start.ravel()[has]
+        idx = np.empty(2 * len(has), dtype=np.intp)
+        idx[0::2], idx[1::2] = at, at + cnt[has]
         for p, v, f in ((0, self.centre[:, 0] - ex, np.minimum), (1, self.centre[:, 0] + ex, np.maximum),
                         (2, self.centre[:, 1] - ey, np.minimum), (3, self.centre[:, 1] + ey, np.maximum)):
-            f.at(out[p].reshape(-1), owner, v[src])
+            out[p].reshape(-1)[has] = f.reduceat(np.append(v, 0.0), idx)[0::2]
         return out
 
     def meet(self, i, ka, other: "SlotBoxes", j, kb, tol: float) -> np.ndarray:

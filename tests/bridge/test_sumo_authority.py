@@ -5,6 +5,7 @@ import json
 import subprocess
 from types import SimpleNamespace
 
+import numpy as np
 import pandas as pd
 import pytest
 
@@ -67,3 +68,45 @@ def test_grid_junctions_authority(grid_cfg, tmp_path):
     assert s["safe"] is True, s.get("safety_violations")
     assert s["tube_escapes"] == 0 and s["claim_violations"] == 0 and s["invariant_violations"] == 0
     assert s["vehicles_arrived"] > 0
+
+
+def test_admission_on_the_near_vehicles_decides_as_on_all(grid_cfg, tmp_path, monkeypatch):
+    """Admission (condition (12)) computes the claims now of only the vehicles whose claims in force
+    after the step's decision come near the entry claims (``Cosim._near_rows``: the fresh claims lie in
+    those).  On the shared grid with real SUMO, at every admission the decision is the one taken
+    against every vehicle's fresh claims; the rule is exercised (vehicles left out, candidates
+    admitted and refused)."""
+    from bridge import cosim as cosim_mod
+    from tm.reach import ReachClaims
+
+    seen = {"steps": 0, "left_out": 0, "admitted": 0, "refused": 0}
+    sims = []
+    real_admit, real_near = cosim_mod.admit_reach, cosim_mod.Cosim._near_rows
+
+    def near(self, ids, entry):
+        sims[:] = [self]
+        got = real_near(self, ids, entry)
+        if got is not None:
+            seen["left_out"] += int((~got).sum())
+        return got
+
+    def admit(current, candidates, check):
+        ok = real_admit(current, candidates, check)
+        sim = sims[0] if sims else None
+        n = sum(len(g.ids) for g in sim.groups.values()) if sim is not None else 0
+        if n:  # the footprints are the last n rows: with every vehicle's fresh claims before them
+            foot = current.take(np.arange(len(current) - n, len(current)))
+            full = real_admit(ReachClaims.concat(sim._reach_claims(), foot), candidates, check)
+            np.testing.assert_array_equal(ok, full)
+            seen["steps"] += 1
+        seen["admitted"] += int(ok.sum())
+        seen["refused"] += int((~ok).sum())
+        return ok
+
+    monkeypatch.setattr(cosim_mod, "admit_reach", admit)
+    monkeypatch.setattr(cosim_mod.Cosim, "_near_rows", near)
+    opts = _opts("authority")
+    opts.duration = 60.0
+    s = run_sumo(str(grid_cfg), tmp_path / "out", opts)
+    assert s["complete"], s.get("error")
+    assert seen["steps"] > 0 and seen["left_out"] > 0 and seen["admitted"] > 0 and seen["refused"] > 0, seen

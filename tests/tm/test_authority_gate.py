@@ -501,10 +501,9 @@ def _turn_scene(k_f: int, right_pad: float, f_holds: bool = False):
     t_in = int(gate.intervals(Scene({}, routes={"T": routes["T"]}, family=family, reach=reach).fleet(), 0)[1][0])
     assert Scene({}, routes={"T": routes["T"]}, k={"T": t_in - 1}, family=family, reach=reach).withhold(gate) == {"T"}
 
-    def pads(row, idx):
+    def pads(rows, idx):
         out = np.zeros((len(idx), 4))
-        if row == 0:  # T: its boxes on the north arm
-            out[np.asarray(idx) > corner, 2] = right_pad
+        out[(np.asarray(rows) == 0) & (np.asarray(idx) > corner), 2] = right_pad  # T: its boxes on the north arm
         return out
 
     W_f = routes["F"][0]
