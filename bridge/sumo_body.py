@@ -39,7 +39,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["RouteBody", "PadTable", "SAMPLE_M", "AHEAD_M", "BACK_M", "OFFSET_MAX_M", "LEAN_MAX_RAD"]
+__all__ = ["RouteBody", "PadTable", "window_starts", "SAMPLE_M", "AHEAD_M", "BACK_M", "OFFSET_MAX_M", "LEAN_MAX_RAD"]
 
 #: Arc spacing of the positions :meth:`RouteBody.pads` evaluates (m); the change of the body
 #: between neighbouring samples is added to the pads, so a coarser grid only costs room.
@@ -113,6 +113,33 @@ def _project(points, arc, p, lo=0.0, hi=np.inf):
     t = d[j] / np.sqrt(ln2[j])[:, None]
     e = t[:, 0] * (p[:, 1] - q[r, j, 1]) - t[:, 1] * (p[:, 0] - q[r, j, 0])
     return sigma, e
+
+
+def window_starts(grids: np.ndarray, sigma_lo: np.ndarray) -> np.ndarray:
+    """:meth:`PadTable.window_start` of many tables at once: ``grids`` (n, 3) their
+    :attr:`PadTable.grid` rows, ``sigma_lo`` (n,); the same indices, float for float."""
+    g = np.asarray(grids, dtype=float).reshape(-1, 3)
+    s = np.asarray(sigma_lo, dtype=float).reshape(-1)
+    step, last, end = g[:, 0], g[:, 1].astype(np.intp), g[:, 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        q = np.where(step > 0, s / np.where(step > 0, step, 1.0), 0.0)
+    nan = np.isnan(q)
+    j = np.clip(np.where(nan, 0.0, q), 0.0, last).astype(np.intp)
+
+    def sig(i):  # the samples, as numpy's linspace makes them
+        return np.where(i >= last, end, i * step)
+
+    while True:
+        up = ~nan & (j < last) & (sig(j + 1) <= s)
+        if not up.any():
+            break
+        j = j + up
+    while True:
+        down = ~nan & (j > 0) & (sig(j) > s)
+        if not down.any():
+            break
+        j = j - down
+    return np.where(nan, last, j)  # NaN sorts last
 
 
 class RouteBody:
@@ -367,8 +394,12 @@ class PadTable:
         :func:`tm.reach.split_pad`).  One-sided because the body of a turn lies off-centre (the
         chord between front and back cuts the inside of the curve): symmetric pads claimed the
         larger side on both and on ``grid`` locked junctions (issue 12)."""
+        return self.pads_at(k, self.window_start(sigma_lo))
+
+    def pads_at(self, k: int, j0: int) -> np.ndarray:
+        """:meth:`pads` for the window starting at sample ``j0`` (:meth:`window_start`,
+        :func:`window_starts`)."""
         k = int(min(max(k, 0), len(self.W) - 1))
-        j0 = self.window_start(sigma_lo)
         tab = self._suffix.get(k)
         if tab is None or j0 < tab[0]:  # a window start before the table's (rolled back): built anew from it
             tab = self._suffix[k] = self._table(k, j0)
@@ -396,6 +427,12 @@ class PadTable:
         while j > 0 and sig[j] > sigma_lo:
             j -= 1
         return j
+
+    @property
+    def grid(self) -> tuple[float, int, float]:
+        """The samples as ``(step, last, end)``: ``sig[j] = j * step`` for ``j < last``, ``sig[last] = end``
+        (a linspace from 0)."""
+        return self._step, len(self.sig) - 1, float(self.sig[-1])
 
     def _table(self, k: int, j_base: int) -> tuple[int, np.ndarray]:
         """Pads of waypoint ``k`` for every window start ``j0 >= j_base``: row ``j0 - j_base`` is

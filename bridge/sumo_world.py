@@ -39,7 +39,7 @@ from bridge.waypoints import RouteError, load_net, trim_start, trim_start_index
 from controllers.classes import VehicleClass, VTypeParams, builtin_classes, vtype_class, vtype_speed_cap
 from controllers.tolerances import HOLD_TOL_M, HOLD_TOL_RAD, POSE_TOL_M
 from bridge.body_fleet import FleetBodies
-from bridge.sumo_body import BACK_M, RouteBody
+from bridge.sumo_body import BACK_M, RouteBody, window_starts
 from tm.pedestrians import PedestrianRule, PedestrianSettings
 from tm.settings import TMSettings, default_check
 from tm.signals import SignalSettings
@@ -164,13 +164,17 @@ class SumoWorld:
         network's geometry."""
         if self.net is None:
             return None
-        zero = np.zeros(4)
-        rows = []
         pads, top = self._pads, self._top
-        for v, kk in zip(ids, np.asarray(k).reshape(-1).tolist()):
-            t = pads.get(v)
-            rows.append(zero if t is None else t.pads(kk, top.get(v, t.arc_k[0]) - BACK_M))
-        return np.array(rows, dtype=float).reshape(len(rows), 4)
+        tabs = [pads.get(v) for v in ids]
+        has = [i for i, t in enumerate(tabs) if t is not None]
+        out = np.zeros((len(tabs), 4))
+        if not has:
+            return out
+        sig = [top.get(ids[i], tabs[i].arc_k[0]) - BACK_M for i in has]
+        j0 = window_starts([tabs[i].grid for i in has], sig).tolist()  # PadTable.window_start, all at once
+        kk = np.asarray(k).reshape(-1).tolist()
+        out[has] = [tabs[i].pads_at(kk[i], j) for i, j in zip(has, j0)]
+        return out
 
     def _poses(self, ids, centre):
         """SUMO's bodies for reference points ``centre`` (see :mod:`bridge.sumo_body`), all vehicles at

@@ -541,6 +541,8 @@ class AuthorityGate(JunctionGate):
         if not len(r):
             return req
         out = req.copy()
+        # the holders' paths and the requesters near each (by their claims' boxes) ...
+        todo = []
         for z, hs in enumerate(self.holders):
             for h in list(hs):
                 row = pos.get(h)
@@ -553,32 +555,47 @@ class AuthorityGate(JunctionGate):
                 m = self.guard_margin
                 near = r[np.all((fleet.claim_lo[r] <= hi.max(axis=0) + m) &
                                 (fleet.claim_hi[r] >= lo.min(axis=0) - m), axis=1)]
-                near = near[(near != row) & out[near]]
-                co = set(pos[v] for v in hs if v in pos)
-                withheld = []
-                hits = self._standing_hits(fleet, near, lo, hi)
-                for j, hit in zip(near.tolist(), hits):
-                    # hit (2, m): the standing boxes now and asked for against each box of the path
-                    if not hit[1].any():  # the asked-for box misses the whole path
-                        continue
-                    if self._on_route(fleet, row, np.array([j]), ahead=1)[0]:
-                        hit = hit[:, 1:]  # its queue: the path after the holder's stop point
-                    elif j in co:
-                        continue
-                    if hit[1].any() and not hit[0].any():
-                        withheld.append(j)
-                if withheld:
-                    out[withheld] = False
-                    self.requests_withheld += len(withheld)
-                    self.wide_withheld += len(withheld)
+                near = near[near != row]
+                if len(near):
+                    todo.append((hs, row, lo, hi, near))
+        if not todo:
+            return out
+        # ... their standing boxes (now, asked for) computed once ...
+        every = np.unique(np.concatenate([t[4] for t in todo]))
+        b_lo, b_hi = self._standing_boxes(fleet, every)
+        at = np.full(len(ids), -1, dtype=np.intp)
+        at[every] = np.arange(len(every))
+        # ... then holder by holder, requests withheld by one holder no longer count for the next
+        for hs, row, lo, hi, near in todo:
+            near = near[out[near]]
+            if not len(near):
+                continue
+            co = set(pos[v] for v in hs if v in pos)
+            q = at[near]  # (n, 2, m): the standing boxes now and asked for against each box of the path
+            hits = np.all((b_lo[q][:, :, None, :] <= hi[None, None]) & (b_hi[q][:, :, None, :] >= lo[None, None]),
+                          axis=3)
+            withheld = []
+            for j, hit in zip(near.tolist(), hits):
+                if not hit[1].any():  # the asked-for box misses the whole path
+                    continue
+                if self._on_route(fleet, row, np.array([j]), ahead=1)[0]:
+                    hit = hit[:, 1:]  # its queue: the path after the holder's stop point
+                elif j in co:
+                    continue
+                if hit[1].any() and not hit[0].any():
+                    withheld.append(j)
+            if withheld:
+                out[withheld] = False
+                self.requests_withheld += len(withheld)
+                self.wide_withheld += len(withheld)
         return out
 
-    def _standing_hits(self, fleet: JunctionFleet, rows: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-        """For each of ``rows``: which of the boxes ``lo, hi`` (m, 2) its standing boxes (padded
-        :meth:`AuthorityReach.hold_box`) at its stop point and at the next waypoint meet, (n, 2, m)."""
+    def _standing_boxes(self, fleet: JunctionFleet, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """World boxes ``(lo, hi)`` (n, 2, 2) of ``rows`` standing (padded :meth:`AuthorityReach.hold_box`)
+        at their stop points and at the next waypoints."""
         n = len(rows)
         if not n:
-            return np.zeros((0, 2, len(lo)), dtype=bool)
+            return np.zeros((0, 2, 2)), np.zeros((0, 2, 2))
         routes = [fleet.route(j) for j in rows.tolist()]
         k = np.array([r[2] for r in routes], dtype=np.intp)
         last = np.array([len(r[0]) - 1 for r in routes], dtype=np.intp)
@@ -593,9 +610,7 @@ class AuthorityGate(JunctionGate):
         for c in np.unique(fam).tolist():
             m = fam == c
             b_lo[m], b_hi[m] = self.classes[c].hold_box(pad[m], Ha[m], Hb[m])
-        b_lo = Wp + b_lo.reshape(n, 2, 2)
-        b_hi = Wp + b_hi.reshape(n, 2, 2)
-        return np.all((b_lo[:, :, None, :] <= hi[None, None]) & (b_hi[:, :, None, :] >= lo[None, None]), axis=3)
+        return Wp + b_lo.reshape(n, 2, 2), Wp + b_hi.reshape(n, 2, 2)
 
     def route_through(self, fleet: JunctionFleet, row: int, z: int):
         """``(key, slot, lo, hi)``: exit slot and corridor of row ``row`` through zone ``z``'s guard.

@@ -15,7 +15,7 @@ from hypothesis import HealthCheck, assume, given, settings, strategies as st
 from bridge.demand import PlannedVehicle
 from bridge.groups import _headings
 from bridge.sumo_adapter import SumoAdapter
-from bridge.sumo_body import BACK_M, OFFSET_MAX_M, RouteBody, _at
+from bridge.sumo_body import BACK_M, OFFSET_MAX_M, RouteBody, _at, window_starts
 from bridge.sumo_world import SumoWorld
 from bridge.cosim import VehicleSpec
 from bridge.waypoints import load_net
@@ -190,6 +190,14 @@ def test_window_start_is_the_last_sample_at_or_before(net):
     want = np.maximum(np.searchsorted(sig, xs, side="right") - 1, 0)
     got = np.array([table.window_start(x) for x in xs])
     np.testing.assert_array_equal(got, want)
+    # many tables at once (SumoWorld.claim_pads): the same indices, for tables of other lengths too
+    other = RouteBody(_route(net, RIGHT), net, *TRUCK).pad_table(
+        _route(net, RIGHT).arc_length, _route(net, RIGHT).waypoints, _headings(_route(net, RIGHT).waypoints),
+        (-40.0, -OFFSET_MAX_M), (1.2, OFFSET_MAX_M))
+    pick = rng.integers(0, 2, len(xs))
+    tabs = [table, other]
+    want2 = np.array([tabs[p].window_start(x) for p, x in zip(pick, xs)])
+    np.testing.assert_array_equal(window_starts([tabs[p].grid for p in pick], xs), want2)
 
 
 def _planned(vid, edges):
