@@ -106,11 +106,20 @@ def path_reach_claims(rm: ReachModel, bare: ReachModel, X, centre, index, place:
         ext = [hl + plo[:, 0], hl + phi[:, 0], hw + plo[:, 1], hw + phi[:, 1]]
     else:
         ext = [np.full(n, hl), np.full(n, hl), np.full(n, hw), np.full(n, hw)]
-    rep = lambda a: np.repeat(np.asarray(a), K, axis=0)  # noqa: E731  (per vehicle -> per slot)
-    boxes = stack_box_cover(place.stack, rep(place.fid), s_lo.ravel(), s_hi.ravel(), n_lo.ravel(), n_hi.ravel(),
-                            *(rep(e) for e in ext))
-    wlo, whi = cover_bounds(boxes, rep(place.centre), rep(place.heading))
+    # a slot equal to the one before (a vehicle at rest: every slot past its index is T^0's) is
+    # covered once: the runs of equal slots share their boxes and bounds
+    same = np.zeros((n, K), dtype=bool)
+    same[:, 1:] = ((s_lo[:, 1:] == s_lo[:, :-1]) & (s_hi[:, 1:] == s_hi[:, :-1]) &
+                   (n_lo[:, 1:] == n_lo[:, :-1]) & (n_hi[:, 1:] == n_hi[:, :-1]))
+    first = np.flatnonzero(~same.ravel())             # the slots covered (flat, vehicle-major)
+    run = np.cumsum(~same.ravel()) - 1                # each slot's covered slot, as an index into first
+    who = first // K                                  # their vehicles
+    boxes = stack_box_cover(place.stack, np.asarray(place.fid)[who], s_lo.ravel()[first], s_hi.ravel()[first],
+                            n_lo.ravel()[first], n_hi.ravel()[first], *(np.asarray(e)[who] for e in ext))
+    wlo, whi = cover_bounds(boxes, np.asarray(place.centre)[who], np.asarray(place.heading)[who])
     # the cover itself, box by box: on a curve the waypoint's frame bounds it coarsely (a bus body
     # at 45 degrees to it reaches 4.5 m across), and it nests as the interval does
+    tight = SlotBoxes(boxes.centre, boxes.heading, boxes.half, boxes.start[run].reshape(n, K),
+                      boxes.count[run].reshape(n, K))
     return ReachClaims(np.asarray(place.centre, dtype=float), np.asarray(place.heading, dtype=float),
-                       wlo.reshape(n, K, 2), whi.reshape(n, K, 2), SlotBoxes.from_cover(boxes, n, K))
+                       wlo[run].reshape(n, K, 2), whi[run].reshape(n, K, 2), tight)

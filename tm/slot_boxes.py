@@ -83,12 +83,12 @@ class SlotBoxes:
 
     @staticmethod
     def concat(*parts: "SlotBoxes") -> "SlotBoxes":
-        """Rows of every part in order (same ``K``), boxes compacted."""
+        """Rows of every part in order (same ``K``); the parts' boxes side by side, as they are (slots
+        that share boxes keep sharing them: :meth:`compact` spells them out)."""
         off = np.cumsum([0] + [len(p.heading) for p in parts[:-1]])
-        out = SlotBoxes(np.vstack([p.centre for p in parts]), np.concatenate([p.heading for p in parts]),
-                        np.vstack([p.half for p in parts]),
-                        np.vstack([p.start + o for p, o in zip(parts, off)]), np.vstack([p.count for p in parts]))
-        return out.compact()
+        return SlotBoxes(np.vstack([p.centre for p in parts]), np.concatenate([p.heading for p in parts]),
+                         np.vstack([p.half for p in parts]),
+                         np.vstack([p.start + o for p, o in zip(parts, off)]), np.vstack([p.count for p in parts]))
 
     @staticmethod
     def assemble(n: int, K: int, pieces) -> "SlotBoxes":

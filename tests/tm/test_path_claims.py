@@ -241,3 +241,55 @@ def test_the_timed_check_compares_the_slots_own_boxes():
     assert pad_slots(claim(0.0), 5).tight.count.shape == (1, 5)
     b = two.slot_boxes  # the pre-filter's world boxes hold both boxes of slot 1
     assert b[0, 0, 0] == -0.5 and b[1, 0, 0] == 1.7
+
+
+@settings(max_examples=20, deadline=None)
+@given(seeds)
+def test_equal_slots_are_covered_once_and_as_slot_by_slot(seed):
+    """Runs of equal slots (a vehicle at rest at its stop point: every slot past its index is
+    ``T^0``'s) are covered once and share their boxes: the claims are the slot-by-slot covers
+    (:func:`tm.path_cover.stack_box_cover` and :func:`cover_bounds` of every slot), float for float,
+    with fewer boxes."""
+    vc, ctl, book = car()
+    rng = np.random.default_rng(seed)
+    W = random_polyline(rng, 12, min_len=3.0, max_len=15.0, max_turn_deg=60.0)
+    frame = PathFrame(W)
+    stack = PathStack([frame])
+    m, rm = vc.model, book.models["car"]
+    n = 6
+    c_s = rng.uniform(10.0, frame.length, n)
+    centre = np.column_stack([c_s, np.zeros(n)])
+    X = np.vstack([m.equilibrium(np.array([c, 0.0])) for c in c_s])  # at rest on their stop points ...
+    X[3:, 0] -= rng.uniform(0.0, 30.0, n - 3)                        # ... or behind them, moving
+    X[3:, 2] = rng.uniform(0.0, 13.0, n - 3)
+    l = np.minimum(ctl.index(X, centre, np.zeros(n)), rm.N)
+    cw, _ = frame.to_world(c_s, np.zeros(n))
+    place = PathPlace(stack, np.zeros(n, dtype=np.intp), cw, rng.uniform(-np.pi, np.pi, n))
+    pad = rng.uniform(0.0, 0.5, (n, 4))
+    got = path_reach_claims(rm, book.bare["car"], X, centre, l, place, body_pad=pad)
+    # the reference: every slot covered on its own
+    path = book.bare["car"]
+    from tm.reach import reach_claims
+    pc = reach_claims(path, X, centre, np.zeros(n), l)
+    K = pc.lo.shape[1]
+    empty = ~((pc.lo[..., 0] <= pc.hi[..., 0]) & (pc.lo[..., 1] <= pc.hi[..., 1]))
+    s_lo = np.where(empty, 1.0, pc.lo[..., 0] + c_s[:, None]).ravel()
+    s_hi = np.where(empty, 0.0, pc.hi[..., 0] + c_s[:, None]).ravel()
+    n_lo = np.where(empty, 0.0, pc.lo[..., 1]).ravel()
+    n_hi = np.where(empty, 0.0, pc.hi[..., 1]).ravel()
+    hl, hw = 0.5 * vc.length, 0.5 * vc.width
+    ext = [hl + pad[:, 0], hl + pad[:, 1], hw + pad[:, 2], hw + pad[:, 3]]
+    rep = lambda a: np.repeat(a, K, axis=0)  # noqa: E731
+    ref = stack_box_cover(stack, rep(place.fid), s_lo, s_hi, n_lo, n_hi, *(rep(e) for e in ext))
+    wlo, whi = cover_bounds(ref, rep(place.centre), rep(place.heading))
+    np.testing.assert_array_equal(got.lo, wlo.reshape(n, K, 2))
+    np.testing.assert_array_equal(got.hi, whi.reshape(n, K, 2))
+    t = got.tight
+    for i in range(n):
+        for k in range(K):
+            f = i * K + k
+            a = slice(t.start[i, k], t.start[i, k] + t.count[i, k])
+            b = slice(ref.start[f], ref.start[f] + ref.count[f])
+            for mine, theirs in ((t.centre, ref.centre), (t.heading, ref.heading), (t.half, ref.half)):
+                np.testing.assert_array_equal(mine[a], theirs[b])
+    assert len(t.heading) < len(ref.heading)  # the runs at rest were covered once

@@ -67,7 +67,11 @@ def test_slot_boxes_against_brute_force(seed):
             assert np.array_equal(asm.half[_boxes_of(asm, r, k)], a.half[_boxes_of(a, rows[r], k)])
             assert np.array_equal(asm.half[_boxes_of(asm, n + r, k)], b.half[_boxes_of(b, r, k)])
     cat = SlotBoxes.concat(a.pad(K), b)
-    assert cat.shape == (2 * n, K) and len(cat.heading) == int(a.count.sum() + b.count.sum())
+    assert cat.shape == (2 * n, K) and len(cat.heading) == len(a.heading) + len(b.heading)
+    for r in range(n):
+        for k in range(K):
+            assert np.array_equal(cat.half[_boxes_of(cat, r, k)], a.half[_boxes_of(a, r, k)])
+            assert np.array_equal(cat.centre[_boxes_of(cat, n + r, k)], b.centre[_boxes_of(b, r, k)])
 
 
 def test_from_frames_one_box_per_non_empty_slot():
