@@ -69,6 +69,9 @@ LEAN_MAX_RAD = float(np.deg2rad(30.0))
 #: Rows per call of the windowed projection in :meth:`RouteBody.project_along` (bounds its arrays).
 _PROJECT_CHUNK = 256
 
+#: Samples per block when a path-frame table computes its samples' reach (bounds its arrays).
+_REACH_CHUNK = 4096
+
 #: SUMO's POSITION_EPS (m): the least shape length MSLane's length-geometry factor takes.
 _POSITION_EPS = 0.1
 
@@ -140,6 +143,16 @@ def window_starts(grids: np.ndarray, sigma_lo: np.ndarray) -> np.ndarray:
             break
         j = j - down
     return np.where(nan, last, j)  # NaN sorts last
+
+
+def _sample_reach(rel: np.ndarray, heading: np.ndarray, step: np.ndarray) -> np.ndarray:
+    """How far bodies reach from their positions (back, front, right, left; (4, m)) in frames at
+    ``heading`` (m,): ``rel`` (m, 3, 4, 2) the corners relative to the positions, ``step`` (m,) added."""
+    c, s = np.cos(heading)[:, None, None], np.sin(heading)[:, None, None]
+    ra = c * rel[..., 0] + s * rel[..., 1]   # corners relative to the position, along the frame
+    ry = -s * rel[..., 0] + c * rel[..., 1]  # and across (left +)
+    return np.array([(-ra).max(axis=(1, 2)), ra.max(axis=(1, 2)),
+                     (-ry).max(axis=(1, 2)), ry.max(axis=(1, 2))]) + step  # back, front, right, left
 
 
 class RouteBody:
@@ -386,6 +399,17 @@ class PadTable:
             dd = np.minimum(dd, lip)
             self.step[:-1] = np.maximum(self.step[:-1], dd)
             self.step[1:] = np.maximum(self.step[1:], dd)
+        if frame == "path":
+            # a sample's reach in the path frame does not depend on the waypoint (the rectangle lies
+            # along the route's segment at the sample): computed once, (n, 4); the corners are then
+            # not needed (a tenth of the memory: 24 floats a sample down to 4)
+            seg = np.searchsorted(self.arc_k, self.sig, side="right")
+            h = self.H[np.clip(seg, 1, len(self.H) - 1)]
+            self._path_reach = np.empty((n, 4))
+            for a in range(0, n, _REACH_CHUNK):
+                b = min(a + _REACH_CHUNK, n)
+                self._path_reach[a:b] = _sample_reach(self.rel[a:b], h[a:b], self.step[a:b]).T
+            del self.rel
 
     def pads(self, k: int, sigma_lo: float) -> np.ndarray:
         """``(back, front, right, left) >= 0``: the padding of waypoint ``k``'s claims for a vehicle
@@ -473,19 +497,14 @@ class PadTable:
         else:  # arc from the waypoint; every sampled offset lies within the box's (e_max)
             a = self.sig[j0:j1] - self.arc_k[k]
             inside = (a >= self.box_lo[0]) & (a <= self.box_hi[0])
-            seg = np.searchsorted(self.arc_k, self.sig[j0:j1][inside], side="right")
-            hs = [self.H[np.clip(seg, 1, len(self.H) - 1)]]
+            if not inside.any():
+                return inside, np.zeros((4, 0))
+            return inside, self._path_reach[j0:j1][inside].T
         if not inside.any():
             return inside, np.zeros((4, 0))
-        r = self.rel[j0:j1][inside]
-        st = self.step[j0:j1][inside]
         reach = None
         for h in hs:
-            c, s = np.cos(h)[:, None, None], np.sin(h)[:, None, None]
-            ra = c * r[..., 0] + s * r[..., 1]   # corners relative to the position, along the frame
-            ry = -s * r[..., 0] + c * r[..., 1]  # and across (left +)
-            got = np.array([(-ra).max(axis=(1, 2)), ra.max(axis=(1, 2)),
-                            (-ry).max(axis=(1, 2)), ry.max(axis=(1, 2))]) + st  # back, front, right, left
+            got = _sample_reach(self.rel[j0:j1][inside], h, self.step[j0:j1][inside])
             reach = got if reach is None else np.maximum(reach, got)
         return inside, reach
 

@@ -402,3 +402,43 @@ def test_leaning_claims_cover_sumo_s_body_on_a_lane_change(net, frac, lat, size)
     boxes = stack_box_cover(PathStack([f]), 0, s_p, s_p, n_p, n_p, size[0] / 2 + pad[0], size[0] / 2 + pad[1],
                             size[1] / 2 + pad[2], size[1] / 2 + pad[3])
     assert points_in_boxes(boxes, [0], corners, 1e-9).any()
+
+
+@pytest.mark.parametrize("edges", [LEFT, RIGHT, STRAIGHT])
+def test_path_padding_tables_are_brute_force(net, edges):
+    """A path-frame ``PadTable`` keeps each sample's reach once (it does not depend on the waypoint)
+    and drops the corners; its pads are, float for float, the brute-force maxima over the window's
+    samples of SUMO's bodies computed anew, in the route segment's frame at each sample, plus the
+    step term, less the half footprint."""
+    r = _route(net, edges)
+    b = RouteBody(r, net, *TRUCK)
+    W, arc = r.waypoints, r.arc_length
+    H = _headings(W)
+    box_lo, box_hi = (-40.0, -OFFSET_MAX_M), (1.2, OFFSET_MAX_M)
+    table = b.pad_table(arc, W, H, box_lo, box_hi, frame="path")
+    assert not hasattr(table, "rel")
+    sig, e = table.sig, table.offset_max
+    q, t, _ = _at(b.poly, b.parc, sig)
+    nrm = np.column_stack([-t[:, 1], t[:, 0]])
+    seg = np.searchsorted(arc, sig, side="right")
+    h = H[np.clip(seg, 1, len(H) - 1)]
+    c, s = np.cos(h)[:, None], np.sin(h)[:, None]
+    reach = np.full((len(sig), 4), -np.inf)
+    for ev in (-e, 0.0, e):
+        rel = b.bodies(sig, np.full(len(sig), ev))[3] - (q + ev * nrm)[:, None, :]
+        ra, ry = c * rel[..., 0] + s * rel[..., 1], -s * rel[..., 0] + c * rel[..., 1]
+        reach = np.maximum(reach, np.column_stack([(-ra).max(1), ra.max(1), (-ry).max(1), ry.max(1)]))
+    reach += table.step[:, None]
+    half = 0.5 * np.array([TRUCK[0], TRUCK[0], TRUCK[1], TRUCK[1]])
+    rng = np.random.default_rng(2)
+    for k in rng.integers(0, len(W), 25).tolist():
+        j1 = int(np.searchsorted(sig, arc[k] + box_hi[0] + 2.0 * TRUCK[0], side="right"))
+        a = sig - arc[k]
+        inside = (a >= box_lo[0]) & (a <= box_hi[0])
+        for j0 in rng.integers(0, max(j1, 1), 4).tolist():
+            m = inside.copy()
+            m[:j0] = False
+            m[j1:] = False
+            want = np.maximum((reach[m] - half).max(axis=0), 0.0) if m.any() else np.zeros(4)
+            np.testing.assert_array_equal(table._pads(k, j0), want)
+            np.testing.assert_array_equal(table.pads_at(k, j0), want)
