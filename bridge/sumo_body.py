@@ -409,7 +409,7 @@ class PadTable:
             for a in range(0, n, _REACH_CHUNK):
                 b = min(a + _REACH_CHUNK, n)
                 self._path_reach[a:b] = _sample_reach(self.rel[a:b], h[a:b], self.step[a:b]).T
-            del self.rel
+            del self.rel, self.ref  # the positions too: the path frame's box is an arc range
 
     def pads(self, k: int, sigma_lo: float) -> np.ndarray:
         """``(back, front, right, left) >= 0``: the padding of waypoint ``k``'s claims for a vehicle

@@ -416,7 +416,7 @@ def test_path_padding_tables_are_brute_force(net, edges):
     H = _headings(W)
     box_lo, box_hi = (-40.0, -OFFSET_MAX_M), (1.2, OFFSET_MAX_M)
     table = b.pad_table(arc, W, H, box_lo, box_hi, frame="path")
-    assert not hasattr(table, "rel")
+    assert not hasattr(table, "rel") and not hasattr(table, "ref")
     sig, e = table.sig, table.offset_max
     q, t, _ = _at(b.poly, b.parc, sig)
     nrm = np.column_stack([-t[:, 1], t[:, 0]])
