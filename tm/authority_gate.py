@@ -215,6 +215,7 @@ class AuthorityGate(JunctionGate):
         #: over the run: token hand-outs deferred because the candidate's path meets a waiter (:meth:`_yields`)
         self.yielded = 0
         self._wide: dict = {}  # (vehicle, zone, waypoint, first) -> its wide path (:meth:`_wide_path`)
+        self._stand_memo: tuple = (None, {})  # (fleet, row -> standing box) (:meth:`_standing`)
         #: (zone, vehicle): tokens handed out with a chained zone's (:meth:`_wanting`) whose holder's
         #: claim has not reached the zone's guard yet; kept until it has (:meth:`_release`)
         self.ahead: set[tuple[int, str]] = set()
@@ -443,7 +444,17 @@ class AuthorityGate(JunctionGate):
         return found
 
     def _standing(self, fleet: JunctionFleet, row: int) -> tuple[np.ndarray, np.ndarray]:
-        """World box ``(lo, hi)`` (2,) of row ``row`` at rest at its stop point (padded hold box)."""
+        """World box ``(lo, hi)`` (2,) of row ``row`` at rest at its stop point (padded hold box);
+        kept for the fleet it was asked for (a step's rounds ask for the same waiters often)."""
+        memo = self._stand_memo
+        if memo[0] is not fleet:
+            memo = self._stand_memo = (fleet, {})
+        got = memo[1].get(row)
+        if got is None:
+            got = memo[1][row] = self._standing_box(fleet, row)
+        return got
+
+    def _standing_box(self, fleet: JunctionFleet, row: int) -> tuple[np.ndarray, np.ndarray]:
         W, H, k = fleet.route(row)
         idx = np.array([k])
         lo, hi = self.classes[fleet.family[row]].hold_box(fleet.pad(row, idx), H[idx],
