@@ -12,6 +12,10 @@ So the claims also keep the cover itself (:class:`tm.slot_boxes.SlotBoxes`, the 
 ``tight`` boxes): the ``timed`` check compares those, box by box; the ``union`` check and the
 junction layer use the waypoint-frame boxes.
 
+A run of equal slots (a vehicle at rest at its stop point: every slot past its index is ``T^0``'s)
+is covered once and its slots share the boxes (``tests/tm/test_path_claims.py`` compares them with
+slot-by-slot covers, float for float).
+
 The claims are then :class:`tm.reach.ReachClaims` like any other, compared, shifted and reused
 with the same rules: the shift ``S_{k+1}(t) ⊇ S_k(t+1)`` holds in path coordinates, and the cover
 and its bounding box grow with the interval, so it holds in the world too.
