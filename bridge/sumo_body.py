@@ -366,6 +366,7 @@ class PadTable:
         n = int(np.ceil(body.route_length / SAMPLE_M)) + 1
         self.sig = np.linspace(0.0, body.route_length, n)
         self._step = float(self.sig[1]) if n > 1 else 0.0
+        self._grid = (self._step, n - 1, float(self.sig[-1]))
         q, t, _ = _at(body.poly, body.parc, self.sig)
         nrm = np.column_stack([-t[:, 1], t[:, 0]])
         rel, ref = [], []
@@ -456,7 +457,7 @@ class PadTable:
     def grid(self) -> tuple[float, int, float]:
         """The samples as ``(step, last, end)``: ``sig[j] = j * step`` for ``j < last``, ``sig[last] = end``
         (a linspace from 0)."""
-        return self._step, len(self.sig) - 1, float(self.sig[-1])
+        return self._grid
 
     def _table(self, k: int, j_base: int) -> tuple[int, np.ndarray]:
         """Pads of waypoint ``k`` for every window start ``j0 >= j_base``: row ``j0 - j_base`` is

@@ -95,7 +95,7 @@ def path_reach_claims(rm: ReachModel, bare: ReachModel, X, centre, index, place:
     n = len(X)
     if len(place) != n:
         raise ValueError(f"path_reach_claims: {n} states but {len(place)} places")
-    path = reach_claims(bare, X, centre, np.zeros(n), index)
+    path = reach_claims(bare, X, centre, np.zeros(n), index, boxes=False)
     K = path.lo.shape[1]
     s_c = np.asarray(centre, dtype=float)[:, 0]
     lo, hi = path.lo, path.hi

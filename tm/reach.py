@@ -236,7 +236,7 @@ class ReachClaims:
 
 
 def reach_claims(rm: ReachModel, X: np.ndarray, centre: np.ndarray, heading: np.ndarray,
-                 index: np.ndarray, body_offset=0.0, body_pad=None) -> ReachClaims:
+                 index: np.ndarray, body_offset=0.0, body_pad=None, boxes: bool = True) -> ReachClaims:
     """Claims of vehicles of one class (vectorised over vehicles and steps).
 
     Parameters
@@ -257,6 +257,10 @@ def reach_claims(rm: ReachModel, X: np.ndarray, centre: np.ndarray, heading: np.
         position (e.g. SUMO's lane-following body around turns, :meth:`bridge.sumo_body.PadTable.pads`):
         ``(along, across)`` on both sides, or one-sided ``(back, front, right, left)``
         (:func:`split_pad`); added to the footprint's half extents on those sides.
+    boxes : bool
+        Attach the slots' world bounding boxes (:attr:`ReachClaims.slot_boxes`) now, from the
+        planar arrays at hand; False where the boxes are not wanted (path-frame claims are drawn
+        from these boxes of path coordinates, :mod:`tm.path_claims`), else computed on first use.
     """
     X = np.asarray(X, dtype=float)
     centre = np.asarray(centre, dtype=float)
@@ -309,7 +313,8 @@ def reach_claims(rm: ReachModel, X: np.ndarray, centre: np.ndarray, heading: np.
         P[1][empty] = P[3][empty] = -np.inf
     lo = np.stack([P[0], P[2]], axis=-1)
     hi = np.stack([P[1], P[3]], axis=-1)
-    return ReachClaims(centre, heading, lo, hi)._with_boxes(_slot_aabb_planar(centre, heading, *P))
+    out = ReachClaims(centre, heading, lo, hi)
+    return out._with_boxes(_slot_aabb_planar(centre, heading, *P)) if boxes else out
 
 
 def split_pad(pad, n: int) -> tuple[np.ndarray, np.ndarray]:
