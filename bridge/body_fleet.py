@@ -119,9 +119,6 @@ class FleetBodies:
         self._lane_scale: list[float] = []
         self._built = None
 
-    def __contains__(self, vid: str) -> bool:
-        return vid in self._bodies
-
     def add(self, vid: str, body: RouteBody) -> None:
         self._bodies[vid] = body
         for k, lane in enumerate(body.lanes):

@@ -605,15 +605,12 @@ class Cosim:
         for c, g in self.groups.items():
             if not g.ids:
                 continue
-            if requests is None and rows is not None:
-                r = np.asarray(rows[o:o + len(g.ids)], dtype=bool)
-                if r.any():
+            if requests is None:
+                r = slice(None) if rows is None else np.asarray(rows[o:o + len(g.ids)], dtype=bool)
+                if rows is None or r.any():
                     cen, hd, _ = g.centres()
                     parts.append((c, g.X[r], cen[r], hd[r], g.l[r], self._group_pads(g)[r],
-                                  self._place(g, 0, np.flatnonzero(r))))
-            elif requests is None:
-                cen, hd, _ = g.centres()
-                parts.append((c, g.X, cen, hd, g.l, self._group_pads(g), self._place(g)))
+                                  self._place(g, 0, None if rows is None else np.flatnonzero(r))))
             else:
                 r = np.asarray(requests.requesting[o:o + len(g.ids)], dtype=bool)
                 cen, hd, _ = g.centres(1)
@@ -890,7 +887,7 @@ class Cosim:
                              width=cur.width)
         if self.authority:  # the others' reach claims and their footprints now (condition (12))
             entry = self._entry_claims(ready, cand, with_index=True)
-            now = self._reach_claims(rows=self._near_rows(cur.ids, entry[0])) if len(cur.ids) else None
+            now = self._reach_claims(rows=self._near_rows(cur.ids, cur.centre, entry[0])) if len(cur.ids) else None
             pos, body = self._poses() if now is not None else (None, None)
             body = cur.heading if self.paths is None else body
             pads = np.vstack([self._group_pads(g) for g in self.groups.values() if g.ids]) if now is not None else None
@@ -935,8 +932,9 @@ class Cosim:
             self.pending = [self.pending[i] for i in keep]
         return n
 
-    def _near_rows(self, ids: list, entry: ReachClaims) -> np.ndarray | None:
-        """The vehicles (bool, fleet order ``ids``) whose claims now may meet the entry claims
+    def _near_rows(self, ids: list, centre: np.ndarray, entry: ReachClaims) -> np.ndarray | None:
+        """The vehicles (bool, fleet order ``ids``; ``centre`` their current waypoints in the world)
+        whose claims now may meet the entry claims
         ``entry``: those whose claims in force after this step's decision do (world boxes of all
         their slots within twice GEOMETRY_TOL).  Their claims from ``x(t+1)`` lie in those
         (``S_k(t+1) ⊆ S_{k+1}(t)``: the reach nests, the index drops, the padding only shrinks as its
@@ -957,8 +955,7 @@ class Cosim:
         near = np.zeros(len(ids), dtype=bool)
         near[j] = True
         # the inclusion needs the waypoint the claims in force were built for: any other, fresh
-        cen = np.vstack([g.world_centres()[0] for g in self.groups.values() if g.ids])
-        near |= ~np.all(cen == f[2].centre[idx], axis=1)
+        near |= ~np.all(np.asarray(centre) == f[2].centre[idx], axis=1)
         return near
 
     def _flush(self, g: _Group, mask=None) -> None:

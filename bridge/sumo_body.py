@@ -120,7 +120,9 @@ def _project(points, arc, p, lo=0.0, hi=np.inf):
 
 def window_starts(grids: np.ndarray, sigma_lo: np.ndarray) -> np.ndarray:
     """:meth:`PadTable.window_start` of many tables at once: ``grids`` (n, 3) their
-    :attr:`PadTable.grid` rows, ``sigma_lo`` (n,); the same indices, float for float."""
+    :attr:`PadTable.grid` rows, ``sigma_lo`` (n,).  The samples are a linspace (``sig[j] = j *
+    step``): an index from the quotient, corrected against the samples themselves, which is what
+    ``searchsorted(sig, sigma_lo, "right") - 1`` (clipped at 0) gives, float for float."""
     g = np.asarray(grids, dtype=float).reshape(-1, 3)
     s = np.asarray(sigma_lo, dtype=float).reshape(-1)
     step, last, end = g[:, 0], g[:, 1].astype(np.intp), g[:, 2]
@@ -440,18 +442,7 @@ class PadTable:
         (the step term covers only the smooth part): the first sample past ``sigma_lo`` alone missed
         the body of the one before (a truck at the window start before a left turn, 1.5 m off the
         route: 0.11 m outside its padded rectangle, ``tests/bridge/test_sumo_body.py``)."""
-        # the samples are a linspace (sig[j] = j * step): an index from the quotient, corrected
-        # against the samples themselves (what searchsorted(sig, sigma_lo, "right") - 1 gives)
-        sig, last = self.sig, len(self.sig) - 1
-        q = sigma_lo / self._step if self._step > 0 else 0.0
-        if q != q:  # NaN sorts last
-            return last
-        j = int(min(max(q, 0.0), last))
-        while j < last and sig[j + 1] <= sigma_lo:
-            j += 1
-        while j > 0 and sig[j] > sigma_lo:
-            j -= 1
-        return j
+        return int(window_starts([self._grid], [sigma_lo])[0])
 
     @property
     def grid(self) -> tuple[float, int, float]:

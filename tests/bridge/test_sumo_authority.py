@@ -83,9 +83,9 @@ def test_admission_on_the_near_vehicles_decides_as_on_all(grid_cfg, tmp_path, mo
     sims = []
     real_admit, real_near = cosim_mod.admit_reach, cosim_mod.Cosim._near_rows
 
-    def near(self, ids, entry):
+    def near(self, ids, centre, entry):
         sims[:] = [self]
-        got = real_near(self, ids, entry)
+        got = real_near(self, ids, centre, entry)
         if got is not None:
             seen["left_out"] += int((~got).sum())
         return got

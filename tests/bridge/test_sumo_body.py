@@ -42,6 +42,18 @@ def _rectangle(c, h, L, W):
                      c - L / 2 * u - W / 2 * n])
 
 
+#: The box of positions the padding tables of these tests cover: 40 m back, 1.2 m ahead, lateral
+#: offsets up to the cap.
+BOX = ((-40.0, -OFFSET_MAX_M), (1.2, OFFSET_MAX_M))
+
+
+def _pad_table(net, edges, size, frame="road"):
+    """Route, body and padding table (:data:`BOX`, the waypoints' own headings) of ``edges``."""
+    r = _route(net, edges)
+    b = RouteBody(r, net, *size)
+    return r, b, b.pad_table(r.arc_length, r.waypoints, _headings(r.waypoints), *BOX, frame=frame)
+
+
 SIZES = [(5.0, 1.8), (12.0, 2.5), TRUCK]  # SUMO's vType sizes of car, bus, truck
 RIGHT = ("A1B1", "B1B0")  # from the west, right turn to the south
 
@@ -92,12 +104,10 @@ def test_path_padding_covers_sumo_body_in_the_body_axes(net, seed, frac, lat, ed
     arc and its waypoint, SUMO's body lies inside the rectangle ``L x W`` centred on it along the
     route's segment there (the body of :func:`tm.path_claims.path_reach_claims`), widened by the
     waypoint's padding in the rectangle's own axes.  Tolerance 1e-9 m, as above."""
-    r = _route(net, edges)
-    b = RouteBody(r, net, *size)
+    r, b, table = _pad_table(net, edges, size, frame="path")
     W, arc = r.waypoints, r.arc_length
     H = _headings(W)
-    box_lo, box_hi = (-40.0, -OFFSET_MAX_M), (1.2, OFFSET_MAX_M)
-    table = b.pad_table(arc, W, H, box_lo, box_hi, frame="path")
+    box_lo, box_hi = BOX
     k = int(np.random.default_rng(seed).integers(1, len(W)))
     lo = max(arc[k] - 30.0, 0.0)
     sigma = lo + frac * (arc[k] + box_hi[0] - lo)
@@ -179,9 +189,7 @@ def test_window_start_is_the_last_sample_at_or_before(net):
     """``PadTable.window_start`` (an index from the samples' spacing, corrected against the samples)
     is ``searchsorted(sig, sigma, "right") - 1`` clipped at 0 for every arc position: random ones,
     each sample itself and the floats just either side of it, and beyond both ends."""
-    r = _route(net, LEFT)
-    table = RouteBody(r, net, *TRUCK).pad_table(r.arc_length, r.waypoints, _headings(r.waypoints),
-                                                (-40.0, -OFFSET_MAX_M), (1.2, OFFSET_MAX_M))
+    table = _pad_table(net, LEFT, TRUCK)[2]
     sig = table.sig
     rng = np.random.default_rng(5)
     pick = sig[rng.integers(0, len(sig), 300)]
@@ -191,9 +199,7 @@ def test_window_start_is_the_last_sample_at_or_before(net):
     got = np.array([table.window_start(x) for x in xs])
     np.testing.assert_array_equal(got, want)
     # many tables at once (SumoWorld.claim_pads): the same indices, for tables of other lengths too
-    other = RouteBody(_route(net, RIGHT), net, *TRUCK).pad_table(
-        _route(net, RIGHT).arc_length, _route(net, RIGHT).waypoints, _headings(_route(net, RIGHT).waypoints),
-        (-40.0, -OFFSET_MAX_M), (1.2, OFFSET_MAX_M))
+    other = _pad_table(net, RIGHT, TRUCK)[2]
     pick = rng.integers(0, 2, len(xs))
     tabs = [table, other]
     want2 = np.array([tabs[p].window_start(x) for p, x in zip(pick, xs)])
@@ -410,12 +416,10 @@ def test_path_padding_tables_are_brute_force(net, edges):
     and drops the corners; its pads are, float for float, the brute-force maxima over the window's
     samples of SUMO's bodies computed anew, in the route segment's frame at each sample, plus the
     step term, less the half footprint."""
-    r = _route(net, edges)
-    b = RouteBody(r, net, *TRUCK)
+    r, b, table = _pad_table(net, edges, TRUCK, frame="path")
     W, arc = r.waypoints, r.arc_length
     H = _headings(W)
-    box_lo, box_hi = (-40.0, -OFFSET_MAX_M), (1.2, OFFSET_MAX_M)
-    table = b.pad_table(arc, W, H, box_lo, box_hi, frame="path")
+    box_lo, box_hi = BOX
     assert not hasattr(table, "rel") and not hasattr(table, "ref")
     sig, e = table.sig, table.offset_max
     q, t, _ = _at(b.poly, b.parc, sig)
