@@ -62,8 +62,8 @@ BACK_M = 0.5
 
 
 #: Largest body lean (rad) :meth:`RouteBody.leans` gives a chord off the lanes: a lane change
-#: crosses a 3.2 m lane in 30 m (6 degrees; bridge.waypoints.LANE_CHANGE_M), or in half a short
-#: edge; a steeper join is a gap in the network's geometry, left without a lean.
+#: crosses a 3.2 m lane in 20-30 m (6-9 degrees; bridge.waypoints.lane_change_plan), or in half a
+#: short edge; a steeper join is a gap in the network's geometry, left without a lean.
 LEAN_MAX_RAD = float(np.deg2rad(30.0))
 
 #: Rows per call of the windowed projection in :meth:`RouteBody.project_along` (bounds its arrays).

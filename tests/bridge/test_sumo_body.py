@@ -18,7 +18,7 @@ from bridge.sumo_adapter import SumoAdapter
 from bridge.sumo_body import BACK_M, OFFSET_MAX_M, RouteBody, _at, window_starts
 from bridge.sumo_world import SumoWorld
 from bridge.cosim import VehicleSpec
-from bridge.waypoints import load_net
+from bridge.waypoints import lane_change_plan, load_net
 from controllers.tolerances import POSE_TOL_M
 from tm.geometry import intersect_sat, polygon_distance
 
@@ -352,14 +352,18 @@ def _lane_change(net, size):
 def test_leans_are_the_lane_s_direction_on_a_lane_change_and_0_elsewhere(net):
     """SUMO keeps the body parallel to the lane while the route crosses to the next lane on a
     diagonal: the chords whose middle lies on the diagonal lean by the angle from the chord to the
-    lane (the diagonal's own chords: -atan(3.2 / 30), 6.1 degrees), every other chord by 0."""
+    lane (the diagonal's own chords: -atan(3.2 / lc), lc its stretch's length from
+    :func:`bridge.waypoints.lane_change_plan`), every other chord by 0."""
     r, b = _lane_change(net, TRUCK)
     assert not r.segment_on_lane.all()
     lean = b.leans(r.waypoints)
     W = r.waypoints
     d = np.diff(W, axis=0)
     h = np.arctan2(d[:, 1], d[:, 0])
-    on_diag = np.abs(np.abs(h) - np.arctan2(3.2, 30.0)) < 1e-9
+    edge = LANE_CHANGE[0][0]
+    length = min(float(np.hypot(*np.diff(net.lane_shape(f"{edge}_{i}"), axis=0).T).sum()) for i in (0, 1))
+    (s0, s1), = lane_change_plan(net.lane_count(edge), 0, 1, length)
+    on_diag = np.abs(np.abs(h) - np.arctan2(3.2, s1 - s0)) < 1e-9
     assert on_diag.sum() >= 5
     np.testing.assert_allclose(lean[on_diag], -h[on_diag], atol=1e-9)  # the lane runs along +x
     sig = b.project(W[:-1] + 0.5 * d)[0]

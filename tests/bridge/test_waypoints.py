@@ -5,7 +5,9 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from bridge.waypoints import RouteError, load_net, point_polyline_distance, route_waypoints, subsample
+from bridge.waypoints import (LANE_CHANGE_END_M, LANE_CHANGE_GAP_M, LANE_CHANGE_M, LANE_CHANGE_MIN_M,
+                              LANE_CHANGE_START_M, RouteError, lane_change_plan, load_net,
+                              point_polyline_distance, route_waypoints, subsample)
 
 #: Waypoints lie on the polyline up to round-off of the interpolation (coordinates ~ 1e2..1e3 m).
 ON_POLYLINE_TOL = 1e-9
@@ -216,3 +218,118 @@ def test_refine_turns_on_tight_curves(radius, sweep_deg, delta):
     assert np.hypot(*np.diff(w2, axis=0).T).max() <= delta + 1e-9
     assert point_polyline_distance(w2, p).max() <= ON_POLYLINE_TOL
     np.testing.assert_array_equal(w2[[0, -1]], p[[0, -1]])
+
+
+# ----------------------------------------------------------------------------- lane-change layout
+def _lateral(n, arrive, leave, length, s, stepwise=True):
+    """Lane coordinate (lane index, fractional on a diagonal) of a route's change at arc lengths ``s``."""
+    plan = lane_change_plan(n, arrive, leave, length, stepwise=stepwise)
+    if not plan:
+        return np.full(len(s), float(arrive))
+    if len(plan) == 1 and abs(leave - arrive) > 1:  # one diagonal across several lanes
+        (s0, s1), = plan
+        return arrive + (leave - arrive) * np.clip((s - s0) / (s1 - s0), 0.0, 1.0)
+    step = np.sign(leave - arrive)
+    y = np.full(len(s), float(arrive))
+    for s0, s1 in plan:
+        y += step * np.clip((s - s0) / (s1 - s0), 0.0, 1.0)
+    return y
+
+
+def _shared_runs_between(d, ds):
+    """Lengths of the runs where ``d == 0`` with ``d != 0`` on both sides (two routes on one lane
+    between two stretches where they are apart), sampled every ``ds``."""
+    z = np.abs(d) <= 1e-9
+    runs, i = [], 0
+    while i < len(z):
+        if z[i]:
+            j = i
+            while j < len(z) and z[j]:
+                j += 1
+            if i > 0 and j < len(z):
+                runs.append((j - i + 1) * ds)
+            i = j
+        else:
+            i += 1
+    return runs
+
+
+@given(n=st.integers(2, 5), length=st.floats(40.0, 600.0), data=st.data())
+@settings(max_examples=200, deadline=None)
+def test_no_two_lane_changes_on_an_edge_cross(n, length, data):
+    """Two routes' lane coordinates along an edge never change order, nor touch and part, but
+    through a stretch where both keep one lane for at least LANE_CHANGE_GAP_M (one follows the
+    other).  Crossing diagonals deadlocked vehicles queued on them in pairs (changes to the left and
+    to the right shared the middle of the edge: 18 vehicles on bench_scale's 4 x 4 grid).  Sampled
+    every 5 cm: the runs measured to within two samples."""
+    lanes = st.integers(0, n - 1)
+    a1, l1, a2, l2 = (data.draw(lanes) for _ in range(4))
+    ds = 0.05
+    s = np.arange(0.0, length, ds)
+    plan = lane_change_plan(n, a1, l1, length)
+    k = 2 * (n - 1)
+    lc = min(LANE_CHANGE_M, (length - LANE_CHANGE_END_M - LANE_CHANGE_START_M - (k - 1) * LANE_CHANGE_GAP_M) / k)
+    if lc < LANE_CHANGE_MIN_M:  # too short for separate stretches: one diagonal in the middle
+        one = min(LANE_CHANGE_M * abs(l1 - a1), 0.5 * length)
+        assert plan == ([] if a1 == l1 else [(0.5 * (length - one), 0.5 * (length + one))])
+        return
+    d = _lateral(n, a1, l1, length, s) - _lateral(n, a2, l2, length, s)
+    for run in _shared_runs_between(d, ds):
+        assert run >= LANE_CHANGE_GAP_M - 2 * ds, (a1, l1, a2, l2, run)
+    # one stretch per boundary crossed, lc long, in order, clear of the edge's ends
+    assert len(plan) == abs(l1 - a1)
+    for (s0, s1), nxt in zip(plan, plan[1:] + [(length, length)]):
+        assert s1 - s0 == pytest.approx(lc, abs=1e-9) and s1 <= nxt[0] + 1e-9
+        assert LANE_CHANGE_START_M - 1e-9 <= s0 and s1 <= length - LANE_CHANGE_END_M + 1e-9
+
+
+def test_the_old_layout_fails_the_crossing_rule():
+    """The rule above fires on crossing diagonals: changes both ways in the middle of the edge."""
+    s = np.arange(0.0, 90.0, 0.05)
+    up = np.clip((s - 30.0) / 30.0, 0.0, 1.0)
+    assert _shared_runs_between(up - (1.0 - up), 0.05) and \
+        min(_shared_runs_between(up - (1.0 - up), 0.05)) < LANE_CHANGE_GAP_M
+
+
+def test_short_edges_and_forbidden_lanes_change_in_one_diagonal():
+    """Too short for separate stretches (each < LANE_CHANGE_MIN_M), or a lane in between the vehicle
+    may not use: one diagonal in the middle, LANE_CHANGE_M per lane, at most half the edge."""
+    assert lane_change_plan(2, 1, 0, 60.0) == [(15.0, 45.0)]          # (60 - 20 - 5 - 12) / 2 < 20 m
+    assert lane_change_plan(3, 0, 2, 300.0, stepwise=False) == [(120.0, 180.0)]
+    # on a 300 m edge: 4 stretches of 30 m, 12 m apart (156 m), ending 20 m before the end; away
+    # from lane 0 first (boundaries 0|1, 1|2), then towards it (2|1, 1|0)
+    assert lane_change_plan(3, 0, 2, 300.0) == [(124.0, 154.0), (166.0, 196.0)]
+    assert lane_change_plan(3, 2, 0, 300.0) == [(208.0, 238.0), (250.0, 280.0)]
+    assert lane_change_plan(3, 2, 1, 300.0) == [(208.0, 238.0)]
+    # our grid's inner blocks (79.2 m): 21.1 m stretches from 5 m on
+    left, right = lane_change_plan(2, 0, 1, 79.2), lane_change_plan(2, 1, 0, 79.2)
+    np.testing.assert_allclose([left[0], right[0]], [(5.0, 26.1), (38.1, 59.2)], rtol=0, atol=1e-9)
+    assert lane_change_plan(2, 1, 1, 80.0) == []
+
+
+def test_changes_to_either_side_use_their_own_stretch_on_the_grid(grid_net):
+    """On our grid (2 lanes, 79-90 m edges): a change away from lane 0 is a diagonal in the first
+    half of the edge's change block, one towards it in the second, at least LANE_CHANGE_GAP_M later
+    and ending LANE_CHANGE_END_M before the edge's end (waypoints 1 m apart: to within 1 m)."""
+    net = load_net(grid_net)
+    found, ends = {}, {}
+    for e0 in sorted(e.getID() for e in net._net.getEdges() if e.getFunction() != "internal"):
+        for e1 in net.successors(e0):
+            for e2 in net.successors(e1):
+                r = route_waypoints(net, [e0, e1, e2], 1.0)
+                off = np.flatnonzero(~r.on_lane & np.array([lid.startswith(e1 + "_") for lid in r.lane_ids]))
+                if not len(off):
+                    continue
+                arrive, leave = int(r.lane_ids[off[0] - 1].rsplit("_", 1)[1]), int(r.lanes[1].rsplit("_", 1)[1])
+                check_waypoints(net, r, 1.0)
+                # arc position along e1 of the diagonal's waypoints, by projection on the leaving lane
+                shape = net.lane_shape(r.lanes[1])
+                seg = np.diff(shape, axis=0)
+                u = seg[0] / np.hypot(*seg[0])
+                s_off = (r.waypoints[off] - shape[0]) @ u
+                found[(arrive, leave)] = (s_off.min(), s_off.max())
+                ends[(arrive, leave)] = float(np.hypot(*np.diff(shape, axis=0).T).sum())
+    assert {(1, 0), (0, 1)} <= set(found)
+    right, left = found[(1, 0)], found[(0, 1)]
+    assert left[1] + LANE_CHANGE_GAP_M <= right[0] + 1.0
+    assert right[1] <= ends[(1, 0)] - LANE_CHANGE_END_M + 1.0 and left[0] >= LANE_CHANGE_START_M - 1.0
