@@ -62,7 +62,9 @@ __all__ = [
     "REVERSAL_DEG",
 ]
 
-#: Longitudinal length of a lane change, per lane crossed (m).  With 15 m (12 degrees
+#: Longitudinal length of a lane change, per lane crossed (m): at most this in
+#: :func:`lane_change_plan`'s stretches, exactly this on a short edge's single diagonal (up to
+#: half the edge).  With 15 m (12 degrees
 #: across a 3.2 m lane) a 12 m bus's turned footprint reached 1.2 m further across, into
 #: the claims of the opposite lane, and met an oncoming car head-on: each one's next claim
 #: met the other's hold region, for good (measured on ``grid``, 600 s).
@@ -541,6 +543,10 @@ class NetGeometry:
         length; SUMO maps a lane position ``pos`` to the shape's arc ``pos * shape / length``)."""
         return float(self._net.getLane(lane_id).getLength())
 
+    def lane_allows(self, edge_id: str, index: int, vclass: str | None) -> bool:
+        """Whether lane ``index`` of an edge admits the SUMO vClass ``vclass`` (None: any)."""
+        return vclass is None or self._net.getEdge(edge_id).getLane(index).allows(vclass)
+
     @property
     def sumolib_net(self):
         """The ``sumolib`` network (read with internal lanes), for queries this class does not wrap."""
@@ -631,8 +637,7 @@ class NetGeometry:
         if depart_lane is None:
             # free start: the lane of the cheapest first connection (no change needed on edge 0)
             if m == 1:  # the lowest lane the vClass may use (lane 0 is often a sidewalk)
-                a0 = next((i for i in range(n_last) if vclass is None or
-                           self._net.getEdge(edges[0]).getLane(i).allows(vclass)), 0)
+                a0 = next((i for i in range(n_last) if self.lane_allows(edges[0], i, vclass)), 0)
             else:
                 a0 = min(conns[0], key=lambda c: (best[1][c.to_lane], c.from_lane, c.to_lane)).from_lane
         else:
@@ -702,8 +707,7 @@ class NetGeometry:
                 lanes = [f"{e}_{j}" for j in range(arrive, leave + step, step)]
                 shapes = [self.lane_shape(ln) for ln in lanes]
                 length = min(_arc(sh)[-1] for sh in shapes)
-                between = all(vclass is None or self._net.getEdge(e).getLane(j).allows(vclass)
-                              for j in range(arrive + step, leave, step))
+                between = all(self.lane_allows(e, j, vclass) for j in range(arrive + step, leave, step))
                 plan = lane_change_plan(self.lane_count(e), arrive, leave, length, stepwise=between)
                 if len(plan) == 1:  # one diagonal, from the arrival lane to the leaving one
                     lanes, shapes = [lanes[0], lanes[-1]], [shapes[0], shapes[-1]]

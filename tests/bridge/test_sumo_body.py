@@ -18,7 +18,7 @@ from bridge.sumo_adapter import SumoAdapter
 from bridge.sumo_body import BACK_M, OFFSET_MAX_M, RouteBody, _at, window_starts
 from bridge.sumo_world import SumoWorld
 from bridge.cosim import VehicleSpec
-from bridge.waypoints import lane_change_plan, load_net
+from bridge.waypoints import _arc, lane_change_plan, load_net
 from controllers.tolerances import POSE_TOL_M
 from tm.geometry import intersect_sat, polygon_distance
 
@@ -361,7 +361,7 @@ def test_leans_are_the_lane_s_direction_on_a_lane_change_and_0_elsewhere(net):
     d = np.diff(W, axis=0)
     h = np.arctan2(d[:, 1], d[:, 0])
     edge = LANE_CHANGE[0][0]
-    length = min(float(np.hypot(*np.diff(net.lane_shape(f"{edge}_{i}"), axis=0).T).sum()) for i in (0, 1))
+    length = min(float(_arc(net.lane_shape(f"{edge}_{i}"))[-1]) for i in (0, 1))  # as NetGeometry.route
     (s0, s1), = lane_change_plan(net.lane_count(edge), 0, 1, length)
     on_diag = np.abs(np.abs(h) - np.arctan2(3.2, s1 - s0)) < 1e-9
     assert on_diag.sum() >= 5

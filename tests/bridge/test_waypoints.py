@@ -5,7 +5,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from bridge.waypoints import (LANE_CHANGE_END_M, LANE_CHANGE_GAP_M, LANE_CHANGE_M, LANE_CHANGE_MIN_M,
+from bridge.waypoints import (LANE_CHANGE_END_M, _arc, LANE_CHANGE_GAP_M, LANE_CHANGE_M, LANE_CHANGE_MIN_M,
                               LANE_CHANGE_START_M, RouteError, lane_change_plan, load_net,
                               point_polyline_distance, route_waypoints, subsample)
 
@@ -328,7 +328,7 @@ def test_changes_to_either_side_use_their_own_stretch_on_the_grid(grid_net):
                 u = seg[0] / np.hypot(*seg[0])
                 s_off = (r.waypoints[off] - shape[0]) @ u
                 found[(arrive, leave)] = (s_off.min(), s_off.max())
-                ends[(arrive, leave)] = float(np.hypot(*np.diff(shape, axis=0).T).sum())
+                ends[(arrive, leave)] = float(_arc(shape)[-1])
     assert {(1, 0), (0, 1)} <= set(found)
     right, left = found[(1, 0)], found[(0, 1)]
     assert left[1] + LANE_CHANGE_GAP_M <= right[0] + 1.0
