@@ -43,7 +43,10 @@ def test_scale_benchmark_quick_mode_writes_its_table(tmp_path, controller):
     # the muvsim run was driven by the controller asked for, and the row says which
     import json
     (summary,) = (tmp_path / "runs").glob("*/muvsim/summary.json")
-    assert r["controller"] == controller == json.loads(summary.read_text())["options"]["controller"]
+    options = json.loads(summary.read_text())["options"]
+    assert r["controller"] == controller == options["controller"]
+    # with the controller's own tube check (the scenario pins none): timed for authority, union for paper
+    assert options["check"] == {"paper": "union", "authority": "timed"}[controller]
     assert 0 < r["active_mean"] <= r["active_max"] <= r["demand"]
     assert r["simulated_s"] == r["sumo_simulated_s"] == 20.0
     # the components, other included, add up to the measured total; all but "other" are >= 0
@@ -73,6 +76,7 @@ def test_sizing_gives_room_for_the_target_and_a_valid_scenario(tmp_path):
     path.write_text(b.scenario_toml(case))
     sc = load_scenario(path)  # the schema validates it
     assert (sc.net.junctions, sc.demand.vehicles, sc.duration_s, sc.seed) == (6, 330, 150.0, 4)
+    assert sc.check is None  # each controller runs with its own default check (tm.settings.default_check)
     assert sc.demand.duration_s == 30.0 and sc.demand.fringe_factor == 1.0
     assert tomllib.loads(path.read_text())["demand"]["class_mix"] == b.CLASS_MIX
     with pytest.raises(ValueError, match="size"):
