@@ -12,7 +12,10 @@ vehicle at admission.  This module reads route files into that plan:
 * ``<vehicle>`` with ``depart`` (seconds), ``type``, and either
   ``route="id"`` or a nested ``<route edges=...>``; ``departLane`` as a lane
   index (anything else -- ``best``, ``free``, ... -- lets the route choose the
-  lane), ``departPos`` in metres.
+  lane), ``departPos`` in metres.  Both are kept on the plan but not yet used:
+  :func:`bridge.sumo_world.run_sumo` starts every vehicle with its back at the
+  start of its first edge (SUMO's ``departPos="base"``) on the lane its route
+  chooses.
 
 ``<trip>``, ``<flow>``, persons and distributions are refused with a clear
 error: route them into vehicles first (:func:`needs_routing` tells;
