@@ -46,8 +46,8 @@ def _last_t(path) -> float:
 #: after the test's Ctrl-C (measured: both cases failed in a fresh-clone CI started that way, the
 #: child's stacks still in ``Cosim.step`` 60 s after SIGINT).  muvsim keeps such a disposition on
 #: purpose (the shell asked for it); the test is about what Ctrl-C does when it is delivered.
-_CLI_WITH_SIGINT = ("import runpy, signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "
-                    "sys.argv[0] = 'bridge.cli'; runpy.run_module('bridge.cli', run_name='__main__', alter_sys=True)")
+_CLI_WITH_SIGINT = ("import runpy, signal; signal.signal(signal.SIGINT, signal.default_int_handler); "
+                    "runpy.run_module('bridge.cli', run_name='__main__', alter_sys=True)")
 
 
 def _start(args, out):
