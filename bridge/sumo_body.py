@@ -37,6 +37,8 @@ where it is and its waypoint), and the reach claims add it to the footprint (tm.
 
 from __future__ import annotations
 
+import sys
+
 import numpy as np
 
 __all__ = ["RouteBody", "PadTable", "window_starts", "SAMPLE_M", "AHEAD_M", "BACK_M", "OFFSET_MAX_M", "LEAN_MAX_RAD"]
@@ -380,7 +382,7 @@ class PadTable:
         self.rel = np.stack(rel, axis=1)  # (n, 3, 4, 2)
         self.ref = np.stack(ref, axis=1)  # (n, 3, 2)
         #: k -> (j_base, (n + 1, 4) suffix maxima of the per-sample pads from j_base on, a zero row last)
-        self._suffix: dict[int, tuple[int, np.ndarray]] = {}
+        self._suffix: dict[int, tuple[int, np.ndarray, np.ndarray]] = {}
         self.step = np.zeros(n)
         if n > 1:
             dr = np.diff(self.rel, axis=0)
@@ -426,6 +428,13 @@ class PadTable:
     def pads_at(self, k: int, j0: int) -> np.ndarray:
         """:meth:`pads` for the window starting at sample ``j0`` (:meth:`window_start`,
         :func:`window_starts`)."""
+        return self.pads_run(k, j0)[0]
+
+    def pads_run(self, k: int, j0: int) -> tuple[np.ndarray, int]:
+        """:meth:`pads_at` and the last window start ``j1 >= j0`` with the same padding: the
+        padding is a suffix maximum, constant over long runs of window starts, so a caller may keep
+        the row while its window starts in ``[j0, j1]`` (:meth:`bridge.sumo_world.SumoWorld.claim_pads`).
+        ``j1`` is ``sys.maxsize`` past the samples that count (the zero row from there on)."""
         k = int(min(max(k, 0), len(self.W) - 1))
         tab = self._suffix.get(k)
         if tab is None or j0 < tab[0]:  # a window start before the table's (rolled back): built anew from it
@@ -433,8 +442,9 @@ class PadTable:
             if len(self._suffix) > 64:  # waypoints left behind (a vehicle's k only grows)
                 for old in sorted(self._suffix)[:32]:
                     del self._suffix[old]
-        base, S = tab
-        return S[min(j0 - base, len(S) - 1)]
+        base, S, last = tab
+        i = min(j0 - base, len(S) - 1)
+        return S[i], (sys.maxsize if i == len(S) - 1 else base + int(last[i]))
 
     def window_start(self, sigma_lo: float) -> int:
         """The first sample a window starting at arc ``sigma_lo`` counts: the last one at or before
@@ -450,18 +460,22 @@ class PadTable:
         (a linspace from 0)."""
         return self._grid
 
-    def _table(self, k: int, j_base: int) -> tuple[int, np.ndarray]:
+    def _table(self, k: int, j_base: int) -> tuple[int, np.ndarray, np.ndarray]:
         """Pads of waypoint ``k`` for every window start ``j0 >= j_base``: row ``j0 - j_base`` is
         :meth:`_pads` ``(k, j0)`` (the same maxima of the same sample values, so the same floats);
-        past the samples that count, the zero row."""
+        past the samples that count, the zero row.  Also, per row, the last row of its run of
+        equal rows."""
         j1 = int(np.searchsorted(self.sig, self.arc_k[k] + self.box_hi[0] + 2.0 * self.length, side="right"))
         if j1 <= j_base:
-            return j_base, np.zeros((1, 4))
+            return j_base, np.zeros((1, 4)), np.zeros(1, dtype=np.intp)
         per = self._per_sample(k, j_base, j1)  # (j1 - j_base, 4), -inf where no position counts
         suf = np.maximum.accumulate(per[::-1], axis=0)[::-1]
         out = np.zeros((len(suf) + 1, 4))
         out[:-1] = np.maximum(suf, 0.0)
-        return j_base, out
+        # last[i]: the last row of row i's run of equal rows (pads_run)
+        ends = np.append(np.flatnonzero(np.any(out[1:] != out[:-1], axis=1)), len(out) - 1)
+        last = ends[np.searchsorted(ends, np.arange(len(out)))]
+        return j_base, out, last
 
     def _per_sample(self, k: int, j0: int, j1: int) -> np.ndarray:
         """Per sample ``j0 <= j < j1``: how far SUMO's body reaches beyond the rectangle (back,

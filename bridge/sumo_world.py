@@ -58,6 +58,9 @@ SUMOCFG_DEFAULTS = {"tm": "optimal", "switching": "early", "disturbance": "rando
 __all__ = ["SumoWorld", "junction_zones", "run_sumo"]
 
 
+#: Padding rows a vehicle keeps per waypoint in :meth:`SumoWorld.claim_pads` (current and requested
+#: waypoints, with room for a grant between lookups).
+_PAD_ROWS_KEPT = 4
 _NEVER = (1e18, 1e18, 0.0)  # pose of a vehicle not yet sent: far from any, so always moved
 
 
@@ -79,6 +82,8 @@ class SumoWorld:
         self._pads: dict = {}               # vehicle -> PadTable (claims' padding)
         self._arcs: dict[str, np.ndarray] = {}  # vehicle -> its waypoints' arc positions on its route
         self._top: dict[str, float] = {}    # vehicle -> furthest arc position reached
+        self._j0: dict[str, int] = {}       # vehicle -> its padding window's first sample (claim_pads)
+        self._pad_rows: dict[str, dict] = {}  # vehicle -> {k: (j0, padding row)} (claim_pads)
         #: changes whenever claim_pads may answer differently for the same vehicles and waypoints
         #: (bodies placed: windows moved; a route's padding registered): bridge.pad_memo keeps answers
         self.pads_version = 0
@@ -154,6 +159,8 @@ class SumoWorld:
             arc = self._waypoint_arcs(spec)
             H = spec_headings(W) if headings is None else np.asarray(headings, dtype=float)
             t = self._pads[spec.id] = b.pad_table(arc, W, H, box_lo, box_hi, frame)
+            self._j0.pop(spec.id, None)
+            self._pad_rows.pop(spec.id, None)
             self.pads_version += 1
         return t.pads(0, t.arc_k[0] - BACK_M)
 
@@ -161,19 +168,43 @@ class SumoWorld:
         """The claims' padding (n, 4), one-sided (:meth:`bridge.sumo_body.PadTable.pads`), of vehicles
         ``ids`` for their waypoints ``k`` (n,), for the positions still ahead of them (from the
         furthest reference point reached, less :data:`~bridge.sumo_body.BACK_M`); None without the
-        network's geometry."""
+        network's geometry.
+
+        A row depends on the vehicle's table, ``k`` and the window's first sample ``j0``; ``j0``
+        moves only when the furthest point reached passes a sample, ``k`` only at a grant, and the
+        row (a suffix maximum) stays the same over long runs of ``j0``
+        (:meth:`~bridge.sumo_body.PadTable.pads_run`).  Each vehicle keeps its last row per ``k``
+        (:data:`_PAD_ROWS_KEPT` waypoints) with the run of ``j0`` it holds for, and its ``j0``
+        until its furthest point moves: a step's many lookups (current and requested waypoints,
+        the junction gate, the tube-escape check, the monitor's claims) read a table only when
+        the padding may have changed."""
         if self.net is None:
             return None
-        pads, top = self._pads, self._top
-        tabs = [pads.get(v) for v in ids]
-        has = [i for i, t in enumerate(tabs) if t is not None]
-        out = np.zeros((len(tabs), 4))
-        if not has:
-            return out
-        sig = [top.get(ids[i], tabs[i].arc_k[0]) - BACK_M for i in has]
-        j0 = window_starts([tabs[i].grid for i in has], sig).tolist()  # PadTable.window_start, all at once
+        pads, j0s, memo = self._pads, self._j0, self._pad_rows
+        n = len(ids)
+        out = np.zeros((n, 4))
         kk = np.asarray(k).reshape(-1).tolist()
-        out[has] = [tabs[i].pads_at(kk[i], j) for i, j in zip(has, j0)]
+        tabs = [pads.get(v) for v in ids]
+        todo = [i for i, (v, t) in enumerate(zip(ids, tabs)) if t is not None and v not in j0s]
+        if todo:  # PadTable.window_start of the vehicles without one, all at once
+            top = self._top
+            sig = [top.get(ids[i], tabs[i].arc_k[0]) - BACK_M for i in todo]
+            j0s.update(zip((ids[i] for i in todo), window_starts([tabs[i].grid for i in todo], sig).tolist()))
+        for i, (v, t) in enumerate(zip(ids, tabs)):
+            if t is None:
+                continue
+            j, ki = j0s[v], kk[i]
+            rows = memo.get(v)
+            if rows is None:
+                rows = memo[v] = {}
+            got = rows.get(ki)
+            if got is None or not got[0] <= j <= got[1]:
+                row, j1 = t.pads_run(ki, j)
+                got = (j, j1, row)
+                if ki not in rows and len(rows) >= _PAD_ROWS_KEPT:
+                    del rows[min(rows)]  # waypoints left behind (a vehicle's k only grows)
+                rows[ki] = got
+            out[i] = got[2]
         return out
 
     def _poses(self, ids, centre):
@@ -190,9 +221,13 @@ class SumoWorld:
         self.offset_max_m = max(self.offset_max_m, float(off.max(initial=0.0)))
         cap = np.array([t.offset_max if (t := self._pads.get(v)) is not None else np.inf for v in ids])
         self.body_window_exits += int(np.sum(off > cap + 1e-9))  # off the padding's offsets
-        top = np.array([self._top.get(v, s) for v, s in zip(ids, sig.tolist())], dtype=float)
+        prev = np.array([self._top.get(v, np.nan) for v in ids], dtype=float)
+        top = np.where(np.isnan(prev), sig, prev)
         self.body_window_exits += int(np.sum(sig < top - BACK_M))  # rolled back past the padding's window
-        self._top.update(zip(ids, np.maximum(top, sig).tolist()))
+        top_new = np.maximum(top, sig)
+        for v in (ids[i] for i in np.flatnonzero(~(top_new == prev)).tolist()):
+            self._j0.pop(v, None)  # its padding window moved: claim_pads reads the start anew
+        self._top.update(zip(ids, top_new.tolist()))
         ax = front - back
         ang = sumo_angle(np.arctan2(ax[:, 1], ax[:, 0])).tolist()
         for v, b, f, a, k in zip(ids, bodies, front, ang, lane.tolist()):
@@ -275,6 +310,8 @@ class SumoWorld:
         self._pads.pop(vid, None)
         self._arcs.pop(vid, None)
         self._top.pop(vid, None)
+        self._j0.pop(vid, None)
+        self._pad_rows.pop(vid, None)
         if vid in self._sumo_arrived:  # SUMO ended the trip itself (its front at the route's end)
             self._sumo_arrived.discard(vid)
             return

@@ -140,3 +140,39 @@ def test_pad_memo_answers_as_the_world(grid_cfg, tmp_path, monkeypatch):
     assert seen["calls"] > 100 and seen["nonzero"] > 0, seen
     m = seen["memo"]
     assert m.served > m.asked, (m.served, m.asked)
+
+
+def test_claim_pads_rows_equal_the_tables(grid_cfg, tmp_path, monkeypatch):
+    """The shared grid, 30 s: every row ``SumoWorld.claim_pads`` answers from its per-vehicle memo
+    (the window start kept until the furthest point reached moves, the rows kept per waypoint) equals
+    the padding read straight from the vehicle's table for the window of that moment
+    (``PadTable.pads(k, top - BACK_M)``), exactly; some rows are non-zero, and the tables were read
+    for fewer rows than were answered (the memo served the rest)."""
+    from bridge import sumo_body, sumo_world
+
+    seen = {"rows": 0, "nonzero": 0, "reads": 0}
+    orig_claim, orig_run = sumo_world.SumoWorld.claim_pads, sumo_body.PadTable.pads_run
+
+    def counted_run(self, k, j0):
+        seen["reads"] += 1
+        return orig_run(self, k, j0)
+
+    def checked(self, ids, k):
+        got = orig_claim(self, ids, k)
+        kk = np.asarray(k).reshape(-1)
+        for i, v in enumerate(ids):
+            t = self._pads.get(v)
+            if t is None:
+                np.testing.assert_array_equal(got[i], 0.0)
+                continue
+            ref = orig_run(t, int(kk[i]), t.window_start(self._top.get(v, t.arc_k[0]) - sumo_body.BACK_M))[0]
+            np.testing.assert_array_equal(got[i], ref, err_msg=f"vehicle {v}, waypoint {kk[i]}")
+            seen["rows"] += 1
+            seen["nonzero"] += int(np.any(ref > 0))
+        return got
+
+    monkeypatch.setattr(sumo_body.PadTable, "pads_run", counted_run)
+    monkeypatch.setattr(sumo_world.SumoWorld, "claim_pads", checked)
+    _run(grid_cfg, tmp_path / "on", "on", duration=30.0)
+    assert seen["rows"] > 1000 and seen["nonzero"] > 0, seen
+    assert seen["reads"] < seen["rows"] / 2, seen
