@@ -74,6 +74,38 @@ def test_slot_boxes_against_brute_force(seed):
             assert np.array_equal(cat.centre[_boxes_of(cat, n + r, k)], b.centre[_boxes_of(b, r, k)])
 
 
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 2**32 - 1))
+def test_world_boxes_of_runs_of_shared_slots(seed):
+    """Slots that share their boxes with the slot before (runs, as a vehicle at rest has and
+    ``aabb`` bounds once per run) get the same world boxes as brute force over each slot's own
+    boxes, slot by slot (exact: the same float expressions), empty runs included."""
+    rng = np.random.default_rng(seed)
+    n, K = int(rng.integers(1, 5)), int(rng.integers(1, 9))
+    a = _random(rng, n, K)
+    start, count = a.start.copy(), a.count.copy()
+    for i in range(n):
+        for k in range(1, K):
+            if rng.random() < 0.6:  # the slot repeats the one before
+                start[i, k], count[i, k] = start[i, k - 1], count[i, k - 1]
+    if K > 1:  # at least one run
+        start[0, 1], count[0, 1] = start[0, 0], count[0, 0]
+    sb = SlotBoxes(a.centre, a.heading, a.half, start, count)
+    box = sb.aabb()
+    for i in range(n):
+        for k in range(K):
+            ids = _boxes_of(sb, i, k)
+            if not ids:
+                assert box[0, i, k] == np.inf and box[1, i, k] == -np.inf
+                assert box[2, i, k] == np.inf and box[3, i, k] == -np.inf
+                continue
+            c, s = np.abs(np.cos(sb.heading[ids])), np.abs(np.sin(sb.heading[ids]))
+            ex = c * sb.half[ids, 0] + s * sb.half[ids, 1]
+            ey = s * sb.half[ids, 0] + c * sb.half[ids, 1]
+            assert box[0, i, k] == (sb.centre[ids, 0] - ex).min() and box[1, i, k] == (sb.centre[ids, 0] + ex).max()
+            assert box[2, i, k] == (sb.centre[ids, 1] - ey).min() and box[3, i, k] == (sb.centre[ids, 1] + ey).max()
+
+
 def test_from_frames_one_box_per_non_empty_slot():
     lo = np.array([[[-1.0, -1.0], [1.0, 0.0]]])
     hi = np.array([[[1.0, 2.0], [0.0, 1.0]]])  # slot 2 empty (lo > hi along)
