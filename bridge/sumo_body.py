@@ -467,14 +467,14 @@ class PadTable:
         equal rows."""
         j1 = int(np.searchsorted(self.sig, self.arc_k[k] + self.box_hi[0] + 2.0 * self.length, side="right"))
         if j1 <= j_base:
-            return j_base, np.zeros((1, 4)), np.zeros(1, dtype=np.intp)
+            return j_base, np.zeros((1, 4)), np.zeros(1, dtype=np.int32)
         per = self._per_sample(k, j_base, j1)  # (j1 - j_base, 4), -inf where no position counts
         suf = np.maximum.accumulate(per[::-1], axis=0)[::-1]
         out = np.zeros((len(suf) + 1, 4))
         out[:-1] = np.maximum(suf, 0.0)
         # last[i]: the last row of row i's run of equal rows (pads_run)
         ends = np.append(np.flatnonzero(np.any(out[1:] != out[:-1], axis=1)), len(out) - 1)
-        last = ends[np.searchsorted(ends, np.arange(len(out)))]
+        last = ends[np.searchsorted(ends, np.arange(len(out)))].astype(np.int32)  # 4 bytes beside each row's 32
         return j_base, out, last
 
     def _per_sample(self, k: int, j0: int, j1: int) -> np.ndarray:
