@@ -83,7 +83,7 @@ class SumoWorld:
         self._arcs: dict[str, np.ndarray] = {}  # vehicle -> its waypoints' arc positions on its route
         self._top: dict[str, float] = {}    # vehicle -> furthest arc position reached
         self._j0: dict[str, int] = {}       # vehicle -> its padding window's first sample (claim_pads)
-        self._pad_rows: dict[str, dict] = {}  # vehicle -> {k: (j0, padding row)} (claim_pads)
+        self._pad_rows: dict[str, dict] = {}  # vehicle -> {k: (j0, last j0, padding row)} (claim_pads)
         #: changes whenever claim_pads may answer differently for the same vehicles and waypoints
         #: (bodies placed: windows moved; a route's padding registered): bridge.pad_memo keeps answers
         self.pads_version = 0
@@ -225,7 +225,7 @@ class SumoWorld:
         top = np.where(np.isnan(prev), sig, prev)
         self.body_window_exits += int(np.sum(sig < top - BACK_M))  # rolled back past the padding's window
         top_new = np.maximum(top, sig)
-        for v in (ids[i] for i in np.flatnonzero(~(top_new == prev)).tolist()):
+        for v in (ids[i] for i in np.flatnonzero(top_new != prev).tolist()):  # NaN: new here
             self._j0.pop(v, None)  # its padding window moved: claim_pads reads the start anew
         self._top.update(zip(ids, top_new.tolist()))
         ax = front - back

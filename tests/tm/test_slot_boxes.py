@@ -26,6 +26,24 @@ def _boxes_of(sb, i, k):
     return list(range(sb.start[i, k], sb.start[i, k] + sb.count[i, k]))
 
 
+def _assert_world_boxes(sb, box):
+    """``box`` ((4, n, K), :meth:`SlotBoxes.aabb`) is, slot by slot, the bounds of that slot's own
+    boxes by brute force (the same float expressions: exact); empty slots inverted."""
+    n, K = sb.shape
+    for i in range(n):
+        for k in range(K):
+            ids = _boxes_of(sb, i, k)
+            if not ids:
+                assert box[0, i, k] == np.inf and box[1, i, k] == -np.inf
+                assert box[2, i, k] == np.inf and box[3, i, k] == -np.inf
+                continue
+            c, s = np.abs(np.cos(sb.heading[ids])), np.abs(np.sin(sb.heading[ids]))
+            ex = c * sb.half[ids, 0] + s * sb.half[ids, 1]
+            ey = s * sb.half[ids, 0] + c * sb.half[ids, 1]
+            assert box[0, i, k] == (sb.centre[ids, 0] - ex).min() and box[1, i, k] == (sb.centre[ids, 0] + ex).max()
+            assert box[2, i, k] == (sb.centre[ids, 1] - ey).min() and box[3, i, k] == (sb.centre[ids, 1] + ey).max()
+
+
 @settings(max_examples=60, deadline=None)
 @given(st.integers(0, 2**32 - 1))
 def test_slot_boxes_against_brute_force(seed):
@@ -33,15 +51,7 @@ def test_slot_boxes_against_brute_force(seed):
     n, K = int(rng.integers(1, 5)), int(rng.integers(1, 5))
     a, b = _random(rng, n, K), _random(rng, n, K)
     box = a.aabb()
-    for i in range(n):
-        for k in range(K):
-            ids = _boxes_of(a, i, k)
-            if not ids:
-                assert box[0, i, k] == np.inf and box[1, i, k] == -np.inf
-                continue
-            c, s = np.abs(np.cos(a.heading[ids])), np.abs(np.sin(a.heading[ids]))
-            ex = c * a.half[ids, 0] + s * a.half[ids, 1]
-            assert box[0, i, k] == (a.centre[ids, 0] - ex).min() and box[1, i, k] == (a.centre[ids, 0] + ex).max()
+    _assert_world_boxes(a, box)
     i, ka = rng.integers(0, n, 40), rng.integers(0, K, 40)
     j, kb = rng.integers(0, n, 40), rng.integers(0, K, 40)
     got = a.meet(i, ka, b, j, kb, 1e-9)
@@ -91,19 +101,7 @@ def test_world_boxes_of_runs_of_shared_slots(seed):
     if K > 1:  # at least one run
         start[0, 1], count[0, 1] = start[0, 0], count[0, 0]
     sb = SlotBoxes(a.centre, a.heading, a.half, start, count)
-    box = sb.aabb()
-    for i in range(n):
-        for k in range(K):
-            ids = _boxes_of(sb, i, k)
-            if not ids:
-                assert box[0, i, k] == np.inf and box[1, i, k] == -np.inf
-                assert box[2, i, k] == np.inf and box[3, i, k] == -np.inf
-                continue
-            c, s = np.abs(np.cos(sb.heading[ids])), np.abs(np.sin(sb.heading[ids]))
-            ex = c * sb.half[ids, 0] + s * sb.half[ids, 1]
-            ey = s * sb.half[ids, 0] + c * sb.half[ids, 1]
-            assert box[0, i, k] == (sb.centre[ids, 0] - ex).min() and box[1, i, k] == (sb.centre[ids, 0] + ex).max()
-            assert box[2, i, k] == (sb.centre[ids, 1] - ey).min() and box[3, i, k] == (sb.centre[ids, 1] + ey).max()
+    _assert_world_boxes(sb, sb.aabb())
 
 
 def test_from_frames_one_box_per_non_empty_slot():
