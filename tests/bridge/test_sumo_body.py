@@ -15,7 +15,7 @@ from hypothesis import HealthCheck, assume, given, settings, strategies as st
 from bridge.demand import PlannedVehicle
 from bridge.groups import _headings
 from bridge.sumo_adapter import SumoAdapter
-from bridge.sumo_body import BACK_M, OFFSET_MAX_M, RouteBody, _at, window_starts
+from bridge.sumo_body import BACK_M, KINK_SLOP_M, OFFSET_MAX_M, RouteBody, _at, window_starts
 from bridge.sumo_world import SumoWorld
 from bridge.cosim import VehicleSpec
 from bridge.waypoints import _arc, lane_change_plan, load_net
@@ -418,8 +418,9 @@ def test_leaning_claims_cover_sumo_s_body_on_a_lane_change(net, frac, lat, size)
 def test_path_padding_tables_are_brute_force(net, edges):
     """A path-frame ``PadTable`` keeps each sample's reach once (it does not depend on the waypoint)
     and drops the corners; its pads are, float for float, the brute-force maxima over the window's
-    samples of SUMO's bodies computed anew, in the route segment's frame at each sample, plus the
-    step term, less the half footprint."""
+    samples of SUMO's bodies computed anew, in the route segment's frame at each sample (and,
+    within ``e_max tan(turn / 2) + KINK_SLOP_M`` of a kink of the chords, in both chords' frames),
+    plus the step term, less the half footprint."""
     r, b, table = _pad_table(net, edges, TRUCK, frame="path")
     W, arc = r.waypoints, r.arc_length
     H = _headings(W)
@@ -437,6 +438,21 @@ def test_path_padding_tables_are_brute_force(net, edges):
         ra, ry = c * rel[..., 0] + s * rel[..., 1], -s * rel[..., 0] + c * rel[..., 1]
         reach = np.maximum(reach, np.column_stack([(-ra).max(1), ra.max(1), (-ry).max(1), ry.max(1)]))
     reach += table.step[:, None]
+    # near a kink of the chords (within e_max tan(turn / 2) + KINK_SLOP_M of it) also in the other
+    # chord's axes (PadTable._kink_reach)
+    for c in range(1, len(H) - 1):
+        turn = float(np.angle(np.exp(1j * (H[c + 1] - H[c]))))
+        if turn == 0.0:
+            continue
+        slop = e * np.tan(0.5 * min(abs(turn), 0.5 * np.pi)) + KINK_SLOP_M
+        near = np.flatnonzero(np.abs(sig - arc[c]) <= slop)
+        for hh in (H[c], H[c + 1]):
+            cc, ss = np.cos(hh), np.sin(hh)
+            for ev in (-e, 0.0, e):
+                rel = b.bodies(sig[near], np.full(len(near), ev))[3] - (q[near] + ev * nrm[near])[:, None, :]
+                ra, ry = cc * rel[..., 0] + ss * rel[..., 1], -ss * rel[..., 0] + cc * rel[..., 1]
+                got = np.column_stack([(-ra).max(1), ra.max(1), (-ry).max(1), ry.max(1)]) + table.step[near, None]
+                reach[near] = np.maximum(reach[near], got)
     half = 0.5 * np.array([TRUCK[0], TRUCK[0], TRUCK[1], TRUCK[1]])
     rng = np.random.default_rng(2)
     for k in rng.integers(0, len(W), 25).tolist():
@@ -450,3 +466,38 @@ def test_path_padding_tables_are_brute_force(net, edges):
             want = np.maximum((reach[m] - half).max(axis=0), 0.0) if m.any() else np.zeros(4)
             np.testing.assert_array_equal(table._pads(k, j0), want)
             np.testing.assert_array_equal(table.pads_at(k, j0), want)
+
+
+@pytest.mark.parametrize("edges", [LEFT, RIGHT, STRAIGHT])
+def test_path_padding_covers_sumo_s_body_at_the_worst_roll_back(net, edges):
+    """End to end, as the loop maps a path-frame plant: positions ``(s, n)`` on the frame (every
+    0.05 m along the route's turn and 5 offsets up to the cap), their world point, SUMO's body of
+    that point (its arc position and offset on the route polyline), and the padding of the window
+    the world gives a vehicle rolled back the whole ``BACK_M`` from its furthest point reached
+    (the window's start at the position's own arc): SUMO's body lies in the padded rectangle along
+    the frame's segment at ``s``.  Near a kink of the waypoints' chords a position of one segment
+    projects onto the route past the vertex, where the samples take the next chord's heading; with
+    their reach in their own chord's axes only (before ``PadTable._kink_reach``) bodies there lay
+    up to 0.26 m outside (46 of 138,600 positions on these turns).  Tolerance 1e-9 m, as above."""
+    from controllers.path import PathFrame, PathStack
+    from tm.path_cover import points_in_boxes, stack_box_cover
+    for size in SIZES:
+        r, b, table = _pad_table(net, edges, size, frame="path")
+        W, arc = r.waypoints, r.arc_length
+        f = PathFrame(W)
+        S = f.to_path(W, arc, window=1.0)[0]
+        s_all = np.arange(20.0, S[-1], 0.05)
+        for n0 in np.linspace(-OFFSET_MAX_M, OFFSET_MAX_M, 5):
+            n_all = np.full(len(s_all), n0)
+            p, _ = f.to_world(s_all, n_all)
+            sig, e = b.project(p, np.interp(s_all, S, arc), 5.0, 5.0)
+            ok = np.abs(e) <= table.offset_max
+            corners = b.bodies(sig, e)[3]
+            k = np.minimum(np.searchsorted(S, s_all), len(W) - 1)
+            for i in np.flatnonzero(ok).tolist():
+                top = float(sig[i]) + BACK_M  # rolled back the whole BACK_M
+                pad = table.pads(int(k[i]), top - BACK_M)
+                boxes = stack_box_cover(PathStack([f]), 0, s_all[i:i + 1], s_all[i:i + 1], n_all[i:i + 1],
+                                        n_all[i:i + 1], size[0] / 2 + pad[0], size[0] / 2 + pad[1],
+                                        size[1] / 2 + pad[2], size[1] / 2 + pad[3])
+                assert points_in_boxes(boxes, [0], corners[i:i + 1], 1e-9).any(), (size, s_all[i], n0)
