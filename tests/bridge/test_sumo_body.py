@@ -494,10 +494,11 @@ def test_path_padding_covers_sumo_s_body_at_the_worst_roll_back(net, edges):
             ok = np.abs(e) <= table.offset_max
             corners = b.bodies(sig, e)[3]
             k = np.minimum(np.searchsorted(S, s_all), len(W) - 1)
-            for i in np.flatnonzero(ok).tolist():
-                top = float(sig[i]) + BACK_M  # rolled back the whole BACK_M
-                pad = table.pads(int(k[i]), top - BACK_M)
-                boxes = stack_box_cover(PathStack([f]), 0, s_all[i:i + 1], s_all[i:i + 1], n_all[i:i + 1],
-                                        n_all[i:i + 1], size[0] / 2 + pad[0], size[0] / 2 + pad[1],
-                                        size[1] / 2 + pad[2], size[1] / 2 + pad[3])
-                assert points_in_boxes(boxes, [0], corners[i:i + 1], 1e-9).any(), (size, s_all[i], n0)
+            i = np.flatnonzero(ok)
+            top = sig[i] + BACK_M  # rolled back the whole BACK_M
+            pad = np.array([table.pads(int(kk), float(tt) - BACK_M) for kk, tt in zip(k[i], top)]).reshape(-1, 4)
+            boxes = stack_box_cover(PathStack([f]), 0, s_all[i], s_all[i], n_all[i], n_all[i],
+                                    size[0] / 2 + pad[:, 0], size[0] / 2 + pad[:, 1],
+                                    size[1] / 2 + pad[:, 2], size[1] / 2 + pad[:, 3])
+            inside = points_in_boxes(boxes, np.arange(len(i)), corners[i], 1e-9).any(axis=1)
+            assert inside.all(), (size, s_all[i][~inside], n0)
