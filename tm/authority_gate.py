@@ -45,6 +45,10 @@ changes is where they apply:
   its stop point and that one's path misses its own: that one does not move until it has the
   token, and the candidate's claims through the zone would meet it (``grid`` seed 2: bus 84 took
   C1's token to turn left beside bus 80 at its entry line and never moved again);
+* **stalled holders** (:meth:`AuthorityGate._passable`): a holder whose stop point has not moved
+  for :attr:`~AuthorityGate.stall_steps` steps holds back a candidate only where the candidate's
+  corridor meets its standing box, not its whole corridor, and a waiter held back by stalled
+  holders alone no longer holds later waiters back: one of them may be what the holders wait for;
 * **corridor**: what the vehicle can hold while its stop point moves from where it is to the
   exit slot: boxes around those waypoints, ``δ/2 + T^0`` along plus ``L/2`` (a position lies
   within ``δ/2`` of a waypoint), ``T^0`` plus ``W/2`` across.  Across, this is the hold region,
@@ -81,6 +85,7 @@ import numpy as np
 from controllers.authority import AuthorityTables
 from tm.boxes import boxes_meet
 from tm.junctions import JunctionFleet, JunctionGate
+from tm.stalls import StallClock
 
 __all__ = ["AuthorityReach", "AuthorityGate"]
 
@@ -202,6 +207,10 @@ class AuthorityGate(JunctionGate):
     """
 
     pass_blocked = True
+    #: steps a holder's stop point must stay put before a candidate whose corridor meets its corridor
+    #: but not its standing box may take the token beside it (:meth:`_passable`; 10 s at 0.1 s
+    #: steps); None: never
+    stall_steps: int | None = 100
     #: Chained zones asked for together, all or none (module notes); off: one zone at a time.
     chain = True
 
@@ -214,6 +223,10 @@ class AuthorityGate(JunctionGate):
         self.wide_withheld = 0
         #: over the run: token hand-outs deferred because the candidate's path meets a waiter (:meth:`_yields`)
         self.yielded = 0
+        #: how long each holder's stop point has stayed put (:meth:`_note_still`)
+        self._still = StallClock()
+        #: over the run: candidates' corridors let past a stalled holder's standing box (:meth:`_passable`)
+        self.stalled_passed = 0
         self._wide: dict = {}  # (vehicle, zone, waypoint, first) -> its wide path (:meth:`_wide_path`)
         self._stand_memo: tuple = (None, {})  # (fleet, row -> standing box) (:meth:`_standing`)
         #: (zone, vehicle): tokens handed out with a chained zone's (:meth:`_wanting`) whose holder's
@@ -531,8 +544,57 @@ class AuthorityGate(JunctionGate):
     def withhold(self, t: int, fleet: JunctionFleet, requesting: np.ndarray, new_lo: np.ndarray,
                  new_hi: np.ndarray) -> np.ndarray:
         """:meth:`JunctionGate.withhold`, then the holders' paths kept clear (:meth:`_keep_out`)."""
+        self._note_still(t, fleet)
         req = super().withhold(t, fleet, requesting, new_lo, new_hi)
         return self._keep_out(fleet, req)
+
+    def _note_still(self, t: int, fleet: JunctionFleet) -> None:
+        """Every holder's stop point at step ``t``, for :meth:`_stalled`."""
+        pos = dict(zip(fleet.ids, range(len(fleet.ids))))
+        self._still.note(t, ((h, fleet.route(pos[h])[2]) for hs in self.holders for h in hs if h in pos))
+
+    def _stalled(self, t: int, holder: str) -> bool:
+        """Whether holder ``holder``'s stop point has stayed put for :attr:`stall_steps` steps."""
+        n = self._still.still_for(t, holder)
+        return self.stall_steps is not None and n is not None and n >= self.stall_steps
+
+    def _corridor_meets(self, fleet: JunctionFleet, row: int, z: int, box) -> bool:
+        """Whether row ``row``'s corridor through zone ``z`` (:meth:`route_through`) meets ``box``
+        ``(lo, hi)``, its boxes taken at each waypoint's arriving
+        and leaving headings apart (their union, not the hull the corridor keeps: at a turn's
+        corner that square reaches a body length sideways both ways)."""
+        _, _, c_lo, _ = self.route_through(fleet, row, z)
+        W, H, k = fleet.route(row)
+        idx = k + np.arange(len(c_lo))
+        cls = self.classes[fleet.family[row]]
+        b_lo, b_hi = box
+        for head in (H[idx], H[np.minimum(idx + 1, len(H) - 1)]):
+            r = cls.half_extent(head)
+            if np.any(np.all((W[idx] - r <= b_hi) & (W[idx] + r >= b_lo), axis=1)):
+                return True
+        return False
+
+    def _passable(self, fleet: JunctionFleet, pos: dict, t: int, holder: str, row: int, z: int) -> bool:
+        """A candidate may take the token beside a holder whose corridor its own meets when that
+        holder is stalled (:meth:`_stalled`: its stop point has not moved for :attr:`stall_steps`
+        steps) and its standing box (:meth:`_standing`: it is at rest at its stop point) misses the
+        candidate's corridor: the holder is not about to take that road, and the candidate may be
+        what it waits for.  The corridor's boxes are taken at each waypoint's arriving and leaving
+        headings apart (their union, not the hull :meth:`route_through` keeps: at a turn's corner
+        that square reaches a body length sideways both ways).  With :meth:`_stalled` in
+        :meth:`JunctionGate._hand_out` (a waiter held back by stalled holders alone holds nobody
+        back), bench_scale's 6 x 6 grid lands 277 of 330 by 470 s, 252 without (issue 12).  It does
+        not free two buses standing side by side at their entry lines, each turning away from the
+        other: either one's rear swings into the other's lane (D5: 247 holding the token, 318 beside
+        it; 318 let past 247 stalls the same way, README Known limits).  Liveness only: the traffic
+        manager checks every claim as before."""
+        h_row = pos.get(holder)
+        if h_row is None or not self._stalled(t, holder):
+            return False
+        if self._corridor_meets(fleet, row, z, self._standing(fleet, h_row)):
+            return False
+        self.stalled_passed += 1
+        return True
 
     def _keep_out(self, fleet: JunctionFleet, req: np.ndarray) -> np.ndarray:
         """Withhold the requests whose requested stop point's standing box

@@ -359,12 +359,14 @@ class JunctionGate:
                     continue
                 if blocked_intr[q]:  # a claim it cannot pass stands in its corridor: it waits for that
                     continue         # one to move, not for the holders, and holds nobody back
-                meet = [h for h, c in holders.items() if self.corridors_meet(key_q, lo_q, hi_q, *c)]
+                meet = [h for h, c in holders.items() if self.corridors_meet(key_q, lo_q, hi_q, *c)
+                        and not self._passable(fleet, pos, t, h, int(wrow[P[q]]), z)]
                 follows = (blocked_exit[q] or meet) and self._follows(fleet, pos, int(wrow[P[q]]), z, meet)
                 if blocked_exit[q] and not follows:
                     continue
                 if meet and not follows:
-                    blocked.append((key_q, lo_q, hi_q))
+                    if not all(self._stalled(t, h) for h in meet):  # else it holds nobody back
+                        blocked.append((key_q, lo_q, hi_q))
                     continue
                 if self._yields(fleet, int(wrow[P[q]]), z, wrow[P[zP == z]]):
                     continue
@@ -374,6 +376,17 @@ class JunctionGate:
                 if cid[q] in self.given_back:
                     self.given_back[cid[q]].discard(z)
         return allowed
+
+    def _passable(self, fleet: JunctionFleet, pos: dict, t: int, holder: str, row: int, z: int) -> bool:
+        """Whether candidate row ``row``, whose corridor through zone ``z`` meets holder ``holder``'s,
+        may take the token beside it all the same (never, here: it waits for the holder)."""
+        return False
+
+    def _stalled(self, t: int, holder: str) -> bool:
+        """Whether holder ``holder`` counts as stalled at step ``t`` (never, here).  A waiter whose
+        corridor meets only stalled holders' waits for them without holding later waiters back
+        (:meth:`_hand_out`): it cannot go before they do, and one of those may be what they wait for."""
+        return False
 
     def _yields(self, fleet: JunctionFleet, row: int, z: int, waiters: np.ndarray) -> bool:
         """Whether row ``row``, next in line for zone ``z``'s token, lets the other ``waiters`` of

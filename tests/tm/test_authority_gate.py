@@ -647,3 +647,65 @@ def test_chained_zones_are_taken_together_or_two_vehicles_lock(chain):
         assert held[0] == {"A": {0}, "B": {1}}
         assert k["A"] < ends["A"] and k["B"] < ends["B"]
         assert held[-1] == {"A": {0}, "B": {1}}  # for good: each waits for the other's token
+
+
+def _stalled_holder_run(h_x: float, stall_steps, steps: int = 12) -> tuple[AuthorityGate, list]:
+    """H (truck) takes the token at its entry line on the east arm to turn right into the north arm,
+    then stands (not asking) with its stop point at ``x = h_x`` on the east arm, inside the guard;
+    C (car) comes down the north arm's other lane (x = -1.6) to go straight through, standing at
+    its entry line and asking.  Their corridors meet at the corner (H's box there spans both
+    headings: x >= 1.6 - 4.25); C's corridor (x <= -0.5) misses H's standing box when it stands at
+    x = 8 (x >= 4.25), not at the corner (x = 1.6).  Returns the gate and, per step, whether C's
+    request was let through."""
+    routes = {"H": _right_turn_east_to_north(), "C": _route(*SOUTH)}
+    family, reach = {"H": "truck"}, {"truck": TRUCK}
+    gate = AuthorityGate([J], {"car": CAR, "truck": TRUCK})
+    gate.stall_steps = stall_steps
+    entry = {v: int(gate.intervals(Scene({}, routes={v: routes[v]}, family=family, reach=reach).fleet(), 0)[1][0])
+             for v in routes}
+    assert Scene({}, routes={"H": routes["H"]}, k={"H": entry["H"] - 1}, family=family,
+                 reach=reach).withhold(gate, t=0) == {"H"}
+    k_h = int(np.argmin(np.linalg.norm(routes["H"][0] - (h_x, 1.6), axis=1)))
+    let = []
+    for t in range(1, steps + 1):
+        scene = Scene({}, routes=routes, k={"H": k_h, "C": entry["C"] - 1}, idle="H", family=family, reach=reach)
+        let.append("C" in scene.withhold(gate, t=t))
+        assert "H" in gate.holders[0]
+    return gate, let
+
+
+@pytest.mark.parametrize("h_x, stall_steps, first", [(8.0, 5, 6), (8.0, None, None), (1.6, 5, None)])
+def test_a_waiter_passes_a_stalled_holder_off_its_standing_box(h_x, stall_steps, first):
+    """The 6 x 6 grid's lock of issue 12 (bench_scale, D5): holder bus 247 stood at its turn's start,
+    its next claims meeting bus 318's standing claim in the next lane; 318 waited for the token in
+    line behind bus 263, whose corridor met 247's corridor: none of the three moved again.  A holder
+    whose stop point has not moved for ``stall_steps`` steps no longer holds back a candidate whose
+    corridor misses its standing box (:meth:`AuthorityGate._passable`): C takes the token beside H
+    at step 1 + ``stall_steps`` (its stop point set at step 1, the first step it was seen), never while H stands
+    in C's corridor, nor with the rule off."""
+    gate, let = _stalled_holder_run(h_x, stall_steps)
+    assert let.index(True) + 1 == first if first else not any(let), let
+    assert ("C" in gate.holders[0]) == bool(first) and (gate.stalled_passed > 0) == bool(first)
+
+
+@pytest.mark.parametrize("stall_steps", [3, None])
+def test_a_waiter_held_back_by_a_stalled_holder_alone_holds_nobody_back(stall_steps):
+    """A holds the token, standing in the middle of the zone (x = 0 on the east-bound lane); B
+    (north-bound, waiting longest) crosses A's corridor and A's standing box (x -2.25 .. 2.25 meets
+    B's corridor, x 0.5 .. 2.7): B waits for A.  D (west-bound) misses A's corridor and standing box
+    but crosses B's corridor: it waits behind B (``pass_blocked``) -- until A has stood for
+    ``stall_steps`` steps: then B, held back by a stalled holder alone, holds nobody back and D
+    takes a token (:meth:`JunctionGate._hand_out` with :meth:`AuthorityGate._stalled`); B still
+    waits.  Off (None), D waits as long as A stands."""
+    gate = _gate()
+    gate.stall_steps = stall_steps
+    assert Scene({"A": EAST}, k={"A": ENTRY - 1}).withhold(gate, t=0) == {"A"}
+    gate.wait[(0, "B")] = -1
+    let = []
+    for t in range(1, 8):
+        scene = Scene({"A": EAST, "B": NORTH, "D": WEST}, k={"A": 30, "B": ENTRY - 1, "D": ENTRY - 1}, idle="A")
+        asked = scene.withhold(gate, t=t)
+        assert "B" not in asked and "A" in gate.holders[0]
+        let.append("D" in asked)
+    assert let == ([False] * 3 + [True] * 4 if stall_steps else [False] * 7)
+    assert gate.stalled_passed == 0  # B was not let past A: its corridor meets A's standing box
