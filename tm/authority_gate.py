@@ -567,23 +567,18 @@ class AuthorityGate(JunctionGate):
         W, H, k = fleet.route(row)
         idx = k + np.arange(len(c_lo))
         cls = self.classes[fleet.family[row]]
-        b_lo, b_hi = box
-        for head in (H[idx], H[np.minimum(idx + 1, len(H) - 1)]):
-            r = cls.half_extent(head)
-            if np.any(np.all((W[idx] - r <= b_hi) & (W[idx] + r >= b_lo), axis=1)):
-                return True
-        return False
+        b_lo, b_hi = np.asarray(box[0])[None], np.asarray(box[1])[None]
+        return any(boxes_meet(W[idx] - r, W[idx] + r, b_lo, b_hi)
+                   for r in (cls.half_extent(H[idx]), cls.half_extent(H[np.minimum(idx + 1, len(H) - 1)])))
 
     def _passable(self, fleet: JunctionFleet, pos: dict, t: int, holder: str, row: int, z: int) -> bool:
         """A candidate may take the token beside a holder whose corridor its own meets when that
         holder is stalled (:meth:`_stalled`: its stop point has not moved for :attr:`stall_steps`
         steps) and its standing box (:meth:`_standing`: it is at rest at its stop point) misses the
         candidate's corridor: the holder is not about to take that road, and the candidate may be
-        what it waits for.  The corridor's boxes are taken at each waypoint's arriving and leaving
-        headings apart (their union, not the hull :meth:`route_through` keeps: at a turn's corner
-        that square reaches a body length sideways both ways).  With :meth:`_stalled` in
-        :meth:`JunctionGate._hand_out` (a waiter held back by stalled holders alone holds nobody
-        back), bench_scale's 6 x 6 grid lands 277 of 330 by 470 s, 252 without (issue 12).  It does
+        what it waits for (the corridor as :meth:`_corridor_meets` takes it).  With :meth:`_stalled`
+        in :meth:`JunctionGate._hand_out` (a waiter held back by stalled holders alone holds nobody
+        back), bench_scale's 6 x 6 grid lands 277 of 330 (none after 450 s), 252 without (issue 12).  It does
         not free two buses standing side by side at their entry lines, each turning away from the
         other: either one's rear swings into the other's lane (D5: 247 holding the token, 318 beside
         it; 318 let past 247 stalls the same way, README Known limits).  Liveness only: the traffic

@@ -354,21 +354,22 @@ class JunctionGate:
                 if z != z_prev:
                     z_prev, blocked, holders = z, [], self.holders[z]
                 key_q, _, lo_q, hi_q = routes[q]
+                row_q = int(wrow[P[q]])
                 if blocked and not (self.pass_blocked and
                                     not any(self.corridors_meet(key_q, lo_q, hi_q, *b) for b in blocked)):
                     continue
                 if blocked_intr[q]:  # a claim it cannot pass stands in its corridor: it waits for that
                     continue         # one to move, not for the holders, and holds nobody back
                 meet = [h for h, c in holders.items() if self.corridors_meet(key_q, lo_q, hi_q, *c)
-                        and not self._passable(fleet, pos, t, h, int(wrow[P[q]]), z)]
-                follows = (blocked_exit[q] or meet) and self._follows(fleet, pos, int(wrow[P[q]]), z, meet)
+                        and not self._passable(fleet, pos, t, h, row_q, z)]
+                follows = (blocked_exit[q] or meet) and self._follows(fleet, pos, row_q, z, meet)
                 if blocked_exit[q] and not follows:
                     continue
                 if meet and not follows:
                     if not all(self._stalled(t, h) for h in meet):  # else it holds nobody back
                         blocked.append((key_q, lo_q, hi_q))
                     continue
-                if self._yields(fleet, int(wrow[P[q]]), z, wrow[P[zP == z]]):
+                if self._yields(fleet, row_q, z, wrow[P[zP == z]]):
                     continue
                 holders[cid[q]] = (key_q, lo_q, hi_q)
                 allowed[P[q]] = True
