@@ -63,6 +63,73 @@ def test_duplicates_merge_reversals_do_not():
     assert b.n_segments == 2 and b.length == pytest.approx(2.0)
 
 
+def _merge_loop(P, tol, fixed=None, matvec=False):
+    """The candidate-at-a-time loop :func:`controllers.path._merge_collinear` replaced (the reference):
+    with ``matvec`` verbatim (``mid @ d``), else with the fast version's elementwise products."""
+    keep = [0]
+    a, n = 0, len(P)
+    j = 1
+    while j < n - 1:
+        d = P[j + 1] - P[a]
+        L = float(np.hypot(d[0], d[1]))
+        ok = L > tol and (fixed is None or not fixed[j])
+        if ok:
+            mid = P[a + 1:j + 1] - P[a]
+            t = mid @ d / L if matvec else (mid[:, 0] * d[0] + mid[:, 1] * d[1]) / L
+            off = np.abs(mid[:, 0] * d[1] - mid[:, 1] * d[0]) / L
+            ok = bool(np.all(off <= tol) and np.all(t > 0.0) and np.all(t < L) and np.all(np.diff(t) > 0.0))
+        if not ok:
+            keep.append(j)
+            a = j
+        j += 1
+    keep.append(n - 1)
+    return np.asarray(keep, dtype=np.intp)
+
+
+def _subsampled(rng, n_seg):
+    """A route as the bridge makes it: a random polyline with every segment subsampled about 1 m
+    apart (long collinear runs), some points nudged across by about the tolerance."""
+    P = random_polyline(rng, n_seg, min_len=1.0, max_len=60.0)
+    out = [P[:1]]
+    for p, q in zip(P[:-1], P[1:]):
+        m = max(int(np.ceil(np.hypot(*(q - p)))), 1)
+        out.append(p + np.linspace(0.0, 1.0, m + 1)[1:, None] * (q - p))
+    W = np.vstack(out)
+    nudge = rng.random(len(W)) < 0.1
+    W[nudge] += rng.choice([-2.0, -1.0, -0.5, 0.5, 1.0, 2.0], (int(nudge.sum()), 1)) * PATH_COLLINEAR_TOL_M * \
+        rng.normal(size=(int(nudge.sum()), 2))
+    return W
+
+
+@settings(max_examples=150, deadline=None)
+@given(seeds, st.integers(1, 25), st.floats(0.0, 0.3))
+def test_blocked_merge_keeps_the_vertices_the_loop_keeps(seed, n_seg, p_fixed):
+    """The blocked merge keeps exactly the vertices of the one-candidate-at-a-time loop, on subsampled
+    routes (runs longer than a block, points nudged by about the tolerance, reversals from the random
+    turns' sums) with random fixed vertices: the same arithmetic, so equal index arrays (no tolerance)."""
+    from controllers.path import _merge_collinear
+    rng = np.random.default_rng(seed)
+    W = _subsampled(rng, n_seg)
+    W = W[np.concatenate([[True], np.hypot(*np.diff(W, axis=0).T) > 1e-9])]
+    fixed = rng.random(len(W)) < p_fixed
+    for fx in (None, fixed):
+        np.testing.assert_array_equal(_merge_collinear(W, PATH_COLLINEAR_TOL_M, fx),
+                                      _merge_loop(W, PATH_COLLINEAR_TOL_M, fx))
+
+
+def test_blocked_merge_keeps_the_vertices_of_the_old_matvec_loop_on_routes():
+    """Against the replaced loop verbatim (``mid @ d``, whose rounding may differ in the last bit from
+    the elementwise products): the same vertices on 200 subsampled routes, none of them within a few
+    ulp of the tolerance."""
+    from controllers.path import _merge_collinear
+    rng = np.random.default_rng(12)
+    for _ in range(200):
+        W = _subsampled(rng, int(rng.integers(2, 20)))
+        W = W[np.concatenate([[True], np.hypot(*np.diff(W, axis=0).T) > 1e-9])]
+        np.testing.assert_array_equal(_merge_collinear(W, PATH_COLLINEAR_TOL_M),
+                                      _merge_loop(W, PATH_COLLINEAR_TOL_M, matvec=True))
+
+
 def test_the_frame_is_immutable():
     f = PathFrame([[0, 0], [1, 0], [1, 1]])
     with pytest.raises(AttributeError):
