@@ -17,9 +17,12 @@ Only ``bridge/`` uses it (:class:`bridge.sumo_world.SumoWorld`).
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
-from bridge.sumo_body import RouteBody
+if TYPE_CHECKING:  # bridge.sumo_body builds its own bodies with this module (RouteBody.bodies)
+    from bridge.sumo_body import RouteBody
 
 __all__ = ["FleetBodies"]
 
@@ -80,8 +83,22 @@ class _Ragged:
     def nearest(self, i0, i1, p):
         """Arc positions and signed offsets (left +) of points ``p`` (n, 2) on the segments between
         global point indices ``i0`` and ``i1`` (exclusive, at least two points), as
-        :func:`bridge.sumo_body._project` without a window."""
+        :func:`bridge.sumo_body._project` without a window.  Rows are taken in groups of like
+        segment counts (up to 1, 2, 4, 8, ...): a row's arrays are as wide as its group's longest
+        polyline, not the longest of all (most lanes are one straight segment; a junction's
+        internal lanes have a few, a curved road's dozens)."""
         nseg = i1 - i0 - 1
+        if len(nseg) and int(nseg.max()) > 1:
+            grp = np.ceil(np.log2(np.maximum(nseg, 1))).astype(np.intp)
+            if grp.min() != grp.max():
+                sigma, e = np.empty(len(p)), np.empty(len(p))
+                for g in np.unique(grp).tolist():
+                    r = np.flatnonzero(grp == g)
+                    sigma[r], e[r] = self._nearest(i0[r], i1[r], p[r], nseg[r])
+                return sigma, e
+        return self._nearest(i0, i1, p, nseg)
+
+    def _nearest(self, i0, i1, p, nseg):
         M = int(nseg.max(initial=0))
         J = i0[:, None] + np.arange(M)[None, :]
         valid = J < (i1 - 1)[:, None]
@@ -192,8 +209,13 @@ class FleetBodies:
         """SUMO's bodies of reference points at arc ``sigma`` (n,) and offset ``e`` (n,) on their
         vehicles' routes: ``front, back`` (n, 2), ``lane`` (n,) (index into each vehicle's
         :attr:`RouteBody.lanes`) and ``corners`` (n, 4, 2), row by row as :meth:`RouteBody.bodies`."""
+        return self.bodies_of_rows(self.rows(ids), sigma, e)
+
+    def bodies_of_rows(self, row, sigma, e):
+        """:meth:`bodies` of the vehicles at rows ``row`` (n,) of the arrays (:meth:`rows`; a body
+        alone, :meth:`RouteBody.bodies`: all 0)."""
         B = self._arrays()
-        row = self.rows(ids)
+        row = np.asarray(row, dtype=np.intp).reshape(-1)
         R, La = B["routes"], B["lanes"]
         sigma = np.asarray(sigma, dtype=float).reshape(-1)
         e = np.broadcast_to(np.asarray(e, dtype=float), sigma.shape)

@@ -247,35 +247,19 @@ class RouteBody:
             right corner (as :func:`tm.geometry.rectangles`).
         """
         sigma = np.asarray(sigma, dtype=float).reshape(-1)
-        e = np.broadcast_to(np.asarray(e, dtype=float), sigma.shape)
-        L, half = self.length, 0.5 * self.length
-        q, t, seg = _at(self.poly, self.parc, sigma + half)
-        front = q + e[:, None] * np.column_stack([-t[:, 1], t[:, 0]])
-        lane = self.seg_lane[seg]
-        back = np.empty_like(front)
-        for k in np.unique(lane):
-            rows = np.flatnonzero(lane == k)
-            s, lat = _project(self.shapes[k], self.arcs[k], front[rows])
-            rem = s / self.scale[k] - L  # SUMO's lane position of the back (negative: on the lanes behind)
-            cur = np.full(len(rows), k)
-            for _ in range(8):
-                short = rem < 0
-                prev = self.behind[cur]
-                go = short & (prev >= 0)
-                if not go.any():
-                    break
-                cur = np.where(go, prev, cur)
-                rem = np.where(go, rem + self.lane_len[cur], rem)
-            for c in np.unique(cur):
-                sel = cur == c
-                pt, tt, _ = _at(self.shapes[c], self.arcs[c], rem[sel] * self.scale[c])
-                back[rows[sel]] = pt + lat[sel, None] * np.column_stack([-tt[:, 1], tt[:, 0]])
-        axis = front - back
-        n = np.hypot(axis[:, 0], axis[:, 1])
-        u = axis / np.where(n > 0, n, 1.0)[:, None]
-        side = 0.5 * self.width * np.column_stack([-u[:, 1], u[:, 0]])
-        corners = np.stack([front - side, front + side, back + side, back - side], axis=1)  # CCW, as tm.geometry
-        return front, back, lane, corners
+        return self._alone().bodies_of_rows(np.zeros(len(sigma), dtype=np.intp), sigma, e)
+
+    def _alone(self):
+        """This body as a fleet of one (:class:`bridge.body_fleet.FleetBodies`, built on first use):
+        its lanes as one ragged array, so :meth:`bodies` takes every row at once instead of a few
+        numpy calls per lane (a route's :class:`PadTable` asks for three bodies per 0.1 m sample)."""
+        f = self.__dict__.get("_fleet")
+        if f is None:
+            from bridge.body_fleet import FleetBodies  # it imports this module (for its types only)
+
+            f = self._fleet = FleetBodies()
+            f.add("", self)
+        return f
 
     def project_along(self, P, hint=None, back: float = 1.0, ahead: float = 10.0) -> np.ndarray:
         """Arc positions of points ``P`` (m, 2) met in order along the route (waypoints, their chords'

@@ -185,6 +185,60 @@ def test_padding_tables_are_the_reference_pads(net, edges):
             np.testing.assert_array_equal(table.pads(k, sg), table._pads(k, j0), err_msg=f"k={k} sigma={sg}")
 
 
+def _bodies_lane_by_lane(b, sigma, e):
+    """The reference :meth:`RouteBody.bodies` (its code until it took every row at once through
+    :class:`bridge.body_fleet.FleetBodies`): lane by lane, a few numpy calls per lane."""
+    from bridge.sumo_body import _project
+    sigma = np.asarray(sigma, dtype=float).reshape(-1)
+    e = np.broadcast_to(np.asarray(e, dtype=float), sigma.shape)
+    L, half = b.length, 0.5 * b.length
+    q, t, seg = _at(b.poly, b.parc, sigma + half)
+    front = q + e[:, None] * np.column_stack([-t[:, 1], t[:, 0]])
+    lane = b.seg_lane[seg]
+    back = np.empty_like(front)
+    for k in np.unique(lane):
+        rows = np.flatnonzero(lane == k)
+        s, lat = _project(b.shapes[k], b.arcs[k], front[rows])
+        rem = s / b.scale[k] - L
+        cur = np.full(len(rows), k)
+        for _ in range(8):
+            prev = b.behind[cur]
+            go = (rem < 0) & (prev >= 0)
+            if not go.any():
+                break
+            cur = np.where(go, prev, cur)
+            rem = np.where(go, rem + b.lane_len[cur], rem)
+        for c in np.unique(cur):
+            sel = cur == c
+            pt, tt, _ = _at(b.shapes[c], b.arcs[c], rem[sel] * b.scale[c])
+            back[rows[sel]] = pt + lat[sel, None] * np.column_stack([-tt[:, 1], tt[:, 0]])
+    axis = front - back
+    n = np.hypot(axis[:, 0], axis[:, 1])
+    u = axis / np.where(n > 0, n, 1.0)[:, None]
+    side = 0.5 * b.width * np.column_stack([-u[:, 1], u[:, 0]])
+    return front, back, lane, np.stack([front - side, front + side, back + side, back - side], axis=1)
+
+
+@pytest.mark.parametrize("size", SIZES)
+@pytest.mark.parametrize("edges", [LEFT, RIGHT, STRAIGHT, ("A1B1", "B1C1", "C1C2"), ("B2B1", "B1A1"), "lane change"])
+def test_bodies_all_rows_at_once_are_the_lane_by_lane_bodies(net, edges, size):
+    """``RouteBody.bodies`` (every row at once, through ``FleetBodies``) gives the very floats of the
+    lane-by-lane reference: fronts, backs, lanes and corners equal (no tolerance), for every 0.1 m
+    of the route and beyond its ends, at offsets 0 and +-1.5 m (the PadTable's samples) and random ones."""
+    if edges == "lane change":  # a diagonal off the lanes: fronts whose lane is not the segment's
+        r, b = _lane_change(net, size)
+        assert not b.seg_on.all()
+    else:
+        r = _route(net, edges)
+        b = RouteBody(r, net, *size)
+    rng = np.random.default_rng(7)
+    sig = np.concatenate([np.arange(-2.0, b.route_length + 2.0, 0.1), rng.uniform(0.0, b.route_length, 300)])
+    for e in (0.0, -OFFSET_MAX_M, OFFSET_MAX_M, rng.uniform(-OFFSET_MAX_M, OFFSET_MAX_M, len(sig))):
+        got, want = b.bodies(sig, e), _bodies_lane_by_lane(b, sig, e)
+        for g, w in zip(got, want):
+            np.testing.assert_array_equal(g, w)
+
+
 def test_window_start_is_the_last_sample_at_or_before(net):
     """``PadTable.window_start`` (an index from the samples' spacing, corrected against the samples)
     is ``searchsorted(sig, sigma, "right") - 1`` clipped at 0 for every arc position: random ones,

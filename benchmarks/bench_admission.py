@@ -1,0 +1,177 @@
+"""What a vehicle costs once, when it is admitted (authority mode in SUMO): its path frame
+(:class:`controllers.path.PathFrame`) and its body padding table (:class:`bridge.sumo_body.PadTable`),
+each against the code it replaced, on the same routes in the same run.
+
+Usage::
+
+    python benchmarks/bench_admission.py [--junctions 8] [--vehicles 60] [--seed 1] [--out benchmarks/results/admission.csv]
+
+A ``junctions x junctions`` grid (100 m blocks, 2 lanes, ``sumo_nets.generate.make_grid``), random
+trips routed by duarouter (``make_demand``), each route's waypoints at most 1 m apart
+(``NetGeometry.route``).  Rows:
+
+* ``path_frame`` / ``blocked`` against ``loop``: the collinear merge, candidate vertices a block at
+  a time (vectorised) against one at a time (the same vertices on every route: checked here);
+* ``pad_table`` / ``all_rows`` against ``lane_by_lane``: a car's path-frame padding table (a
+  car's box, 40 m back to 1.2 m ahead, offsets +-0.95 m), SUMO's bodies at its 0.1 m samples
+  computed every row at once (:class:`bridge.body_fleet.FleetBodies`) against lane by lane (the
+  same arrays: checked here).
+
+Prints and writes the median and total ms per route, the median waypoints and each method's ratio
+to the new one.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+import time
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from bridge.groups import _headings  # noqa: E402
+from bridge.sumo_body import RouteBody, _at, _project  # noqa: E402
+from bridge.waypoints import load_net  # noqa: E402
+from controllers import path as cpath  # noqa: E402
+from controllers.tolerances import PATH_COLLINEAR_TOL_M  # noqa: E402
+from sumo_nets.generate import make_demand, make_grid  # noqa: E402
+
+
+def merge_loop(P, tol, fixed=None):
+    """The merge before the blocked one: one candidate vertex at a time (numpy calls per point)."""
+    keep = [0]
+    a, n = 0, len(P)
+    j = 1
+    while j < n - 1:
+        d = P[j + 1] - P[a]
+        L = float(np.hypot(d[0], d[1]))
+        ok = L > tol and (fixed is None or not fixed[j])
+        if ok:
+            mid = P[a + 1:j + 1] - P[a]
+            t = mid @ d / L
+            off = np.abs(mid[:, 0] * d[1] - mid[:, 1] * d[0]) / L
+            ok = bool(np.all(off <= tol) and np.all(t > 0.0) and np.all(t < L) and np.all(np.diff(t) > 0.0))
+        if not ok:
+            keep.append(j)
+            a = j
+        j += 1
+    keep.append(n - 1)
+    return np.asarray(keep, dtype=np.intp)
+
+
+def bodies_lane_by_lane(b, sigma, e):
+    """:meth:`RouteBody.bodies` before it took every row at once: lane by lane."""
+    sigma = np.asarray(sigma, dtype=float).reshape(-1)
+    e = np.broadcast_to(np.asarray(e, dtype=float), sigma.shape)
+    L, half = b.length, 0.5 * b.length
+    q, t, seg = _at(b.poly, b.parc, sigma + half)
+    front = q + e[:, None] * np.column_stack([-t[:, 1], t[:, 0]])
+    lane = b.seg_lane[seg]
+    back = np.empty_like(front)
+    for k in np.unique(lane):
+        rows = np.flatnonzero(lane == k)
+        s, lat = _project(b.shapes[k], b.arcs[k], front[rows])
+        rem = s / b.scale[k] - L
+        cur = np.full(len(rows), k)
+        for _ in range(8):
+            prev = b.behind[cur]
+            go = (rem < 0) & (prev >= 0)
+            if not go.any():
+                break
+            cur = np.where(go, prev, cur)
+            rem = np.where(go, rem + b.lane_len[cur], rem)
+        for c in np.unique(cur):
+            sel = cur == c
+            pt, tt, _ = _at(b.shapes[c], b.arcs[c], rem[sel] * b.scale[c])
+            back[rows[sel]] = pt + lat[sel, None] * np.column_stack([-tt[:, 1], tt[:, 0]])
+    axis = front - back
+    n = np.hypot(axis[:, 0], axis[:, 1])
+    u = axis / np.where(n > 0, n, 1.0)[:, None]
+    side = 0.5 * b.width * np.column_stack([-u[:, 1], u[:, 0]])
+    return front, back, lane, np.stack([front - side, front + side, back + side, back - side], axis=1)
+
+
+#: a car's padding box (path frame): arc from the waypoint and offset (the car's sets, rounded out)
+BOX = ((-40.0, -0.95), (1.2, 0.95))
+
+
+def pad_tables(net, R, reference: bool):
+    saved = RouteBody.bodies
+    if reference:
+        RouteBody.bodies = bodies_lane_by_lane
+    try:
+        ms, tables = [], []
+        for r in R:
+            t0 = time.perf_counter()
+            b = RouteBody(r, net, 5.0, 1.8)
+            tables.append(b.pad_table(r.arc_length, r.waypoints, _headings(r.waypoints), *BOX, frame="path"))
+            ms.append(1e3 * (time.perf_counter() - t0))
+        return np.array(ms), tables
+    finally:
+        RouteBody.bodies = saved
+
+
+def routes(junctions: int, vehicles: int, seed: int, work: Path):
+    net_file = make_grid(work, junctions=junctions, spacing_m=100.0, lanes=2)
+    rou = make_demand(net_file, work, seed=seed, vehicles=vehicles, duration_s=60.0, class_mix={"car": 1.0},
+                      min_distance_m=300.0)
+    net = load_net(net_file)
+    return net, [net.route(r.get("edges").split(), 1.0) for r in ET.parse(rou).getroot().iter("route")]
+
+
+def time_frames(W_all, merge) -> np.ndarray:
+    saved = cpath._merge_collinear
+    cpath._merge_collinear = merge
+    try:
+        ms = []
+        for W in W_all:
+            t0 = time.perf_counter()
+            cpath.PathFrame(W)
+            ms.append(1e3 * (time.perf_counter() - t0))
+        return np.array(ms)
+    finally:
+        cpath._merge_collinear = saved
+
+
+def main(argv=None) -> pd.DataFrame:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--junctions", type=int, default=8)
+    ap.add_argument("--vehicles", type=int, default=60)
+    ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--out", default="benchmarks/results/admission.csv")
+    a = ap.parse_args(argv)
+    with tempfile.TemporaryDirectory() as tmp:
+        net, R = routes(a.junctions, a.vehicles, a.seed, Path(tmp))
+    W_all = [np.asarray(r.waypoints, dtype=float) for r in R]
+    for W in W_all:
+        if not np.array_equal(cpath._merge_collinear(W, PATH_COLLINEAR_TOL_M), merge_loop(W, PATH_COLLINEAR_TOL_M)):
+            raise SystemExit("bench_admission: the two merges keep different vertices on a route")
+    wp = float(np.median([len(W) for W in W_all]))
+    pad_new, tabs_new = pad_tables(net, R, False)
+    pad_ref, tabs_ref = pad_tables(net, R, True)
+    for x, y in zip(tabs_new, tabs_ref):
+        if not (np.array_equal(x._path_reach, y._path_reach) and np.array_equal(x.step, y.step)):
+            raise SystemExit("bench_admission: the two padding tables differ on a route")
+    runs = [("path_frame", "blocked", time_frames(W_all, cpath._merge_collinear)),
+            ("path_frame", "loop", time_frames(W_all, merge_loop)),
+            ("pad_table", "all_rows", pad_new), ("pad_table", "lane_by_lane", pad_ref)]
+    rows = [dict(part=p, method=m, routes=len(W_all), waypoints_median=wp, ms_median=float(np.median(ms)),
+                 ms_total=float(ms.sum())) for p, m, ms in runs]
+    df = pd.DataFrame(rows)
+    new = df.groupby("part")["ms_median"].transform("first")
+    df["ratio_to_new"] = df["ms_median"] / new
+    print(df.to_string(index=False, float_format=lambda x: f"{x:.3g}"))
+    Path(a.out).parent.mkdir(parents=True, exist_ok=True)
+    df.to_csv(a.out, index=False)
+    print(f"wrote {a.out}")
+    return df
+
+
+if __name__ == "__main__":
+    main()
