@@ -45,7 +45,8 @@ from controllers.tolerances import GEOMETRY_TOL
 from tm.claims import Claims
 from tm.reach import ReachClaims, candidate_pairs, world_aabb
 from tm.reach_book import ReachBook, admit_reach, footprint_claims
-from tm.authority_gate import AuthorityGate, AuthorityReach
+from tm.authority_gate import AuthorityGate
+from tm.authority_reach import AuthorityReach
 from tm.reach_cache import ClaimCache
 from tm.junctions import ClassReach, JunctionFleet, JunctionGate, Zone
 from tm.manager import FleetState, TrafficManager

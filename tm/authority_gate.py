@@ -22,7 +22,7 @@ changes is where they apply:
   the token the stop point may move up to it (and on, outside the guard, without one); the token
   is handed out only with room there for the stopped vehicle: no other vehicle's claim on the
   slot's hold box;
-* **room for the claims' width** (:meth:`AuthorityGate._keep_out`):
+* **room for the claims' width** (:class:`tm.keep_out.KeepOut`):
   the exit slot's hold box is narrower than the claims a holder makes on its way there (the
   claims' across half-width plus ``W/2`` and the body padding across, ``T^0 + L/2`` past the slot
   along), and the opposite approach's first waiter stands at its entry line right beside the exit
@@ -78,118 +78,16 @@ Pure numpy, no simulator; safety stays with the traffic manager, which checks ev
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
-from controllers.authority import AuthorityTables
+from tm.authority_reach import AuthorityReach
 from tm.boxes import boxes_meet
 from tm.junctions import JunctionFleet, JunctionGate
+from tm.keep_out import KeepOut
 from tm.stalls import StallClock
 
 __all__ = ["AuthorityReach", "AuthorityGate"]
 
-
-
-def _world_box(a: float, b: float, pad: np.ndarray, *headings: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Offsets ``(lo, hi)`` (n, 2) from the waypoints of the world bounding box of a segment-frame
-    box ``±a`` along, ``±b`` across, padded one-sided by ``pad`` (n, 4: back, front, right, left;
-    the frame's ``y`` points left), hulled over the given headings."""
-    pad = np.asarray(pad, dtype=float)
-    cx, cy = 0.5 * (pad[:, 1] - pad[:, 0]), 0.5 * (pad[:, 3] - pad[:, 2])
-    ea, eb = a + 0.5 * (pad[:, 0] + pad[:, 1]), b + 0.5 * (pad[:, 2] + pad[:, 3])
-    lo = hi = None
-    for h in headings:
-        c, s = np.cos(h), np.sin(h)
-        mid = np.stack([c * cx - s * cy, s * cx + c * cy], axis=1)
-        e = np.stack([np.abs(c) * ea + np.abs(s) * eb, np.abs(s) * ea + np.abs(c) * eb], axis=1)
-        lo = mid - e if lo is None else np.minimum(lo, mid - e)
-        hi = mid + e if hi is None else np.maximum(hi, mid + e)
-    return lo, hi
-
-
-def _world_half(a: float, b: float, *headings: np.ndarray) -> np.ndarray:
-    """Half extents (n, 2) of the world bounding box of a segment-frame box ``±a`` along, ``±b``
-    across, hulled over the given headings (a waypoint's arriving and leaving segments)."""
-    out = None
-    for h in headings:
-        c, s = np.abs(np.cos(h))[:, None], np.abs(np.sin(h))[:, None]
-        e = np.hstack([c * a + s * b, s * a + c * b])
-        out = e if out is None else np.maximum(out, e)
-    return out
-
-
-@dataclass(frozen=True, eq=False)
-class AuthorityReach:
-    """What the junction layer needs of a movement-authority class (metres).
-
-    Parameters
-    ----------
-    hold, hold_y : float
-        Half extents of ``T^0``'s position along and across the road (the vehicle at rest at its
-        stop point lies in ``T^0``).
-    across : float
-        The claims' across half-width: ``max |y|`` over every level's across range (a claim lies
-        inside ``T^m``, so inside it).
-    length, width : float
-        Footprint.
-    delta : float
-        Largest gap between consecutive waypoints.
-    """
-
-    hold: float
-    hold_y: float
-    across: float
-    length: float
-    width: float
-    delta: float
-
-    def __post_init__(self) -> None:
-        vals = dict(hold=self.hold, hold_y=self.hold_y, across=self.across, length=self.length,
-                    width=self.width, delta=self.delta)
-        bad = {k: v for k, v in vals.items() if not (np.isfinite(v) and v >= 0)}
-        if bad or not (self.length > 0 and self.width > 0 and self.delta > 0):
-            raise ValueError(f"AuthorityReach: extents must be finite and >= 0 m, length, width and delta > 0; "
-                             f"got {vals}")
-
-    @staticmethod
-    def of(tables: AuthorityTables, length: float, width: float, delta: float) -> AuthorityReach:
-        """From a movement-authority family's tables (:func:`controllers.authority.build_tables`)."""
-        return AuthorityReach(hold=float(max(-tables.p_lo[0], tables.p_hi[0])),
-                              hold_y=float(max(-tables.y_lo[0], tables.y_hi[0])),
-                              across=float(max(-tables.y_lo.min(), tables.y_hi.max())),
-                              length=float(length), width=float(width), delta=float(delta))
-
-    @property
-    def guard_reach(self) -> float:
-        """How far this class's claims stick out of a zone its route crosses: the across
-        half-width plus half the footprint's diagonal (the body turns inside the junction)."""
-        return self.across + 0.5 * float(np.hypot(self.length, self.width))
-
-    def hold_half(self, *headings: np.ndarray) -> np.ndarray:
-        """World half extents (n, 2) of the hold box ``T^0 ⊕ footprint`` at the headings."""
-        return _world_half(self.hold + 0.5 * self.length, self.hold_y + 0.5 * self.width, *headings)
-
-    def claim_half(self, *headings: np.ndarray) -> np.ndarray:
-        """World half extents (n, 2) of what a claim with its stop point at a waypoint covers there:
-        ``T^0`` along plus ``L/2``, the claims' across half-width plus ``W/2`` across."""
-        return _world_half(self.hold + 0.5 * self.length, self.across + 0.5 * self.width, *headings)
-
-    def claim_box(self, pad: np.ndarray, *headings: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """:meth:`claim_half` padded one-sided by ``pad`` (n, 4: back, front, right, left): offsets
-        ``(lo, hi)`` (n, 2) from the waypoints of what a claim with its stop point there covers."""
-        return _world_box(self.hold + 0.5 * self.length, self.across + 0.5 * self.width, pad, *headings)
-
-    def hold_box(self, pad: np.ndarray, *headings: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """:meth:`hold_half` padded one-sided by ``pad``: offsets ``(lo, hi)`` (n, 2) of the box of a
-        vehicle at rest at its stop point (its standing claim)."""
-        return _world_box(self.hold + 0.5 * self.length, self.hold_y + 0.5 * self.width, pad, *headings)
-
-    def half_extent(self, *headings: np.ndarray) -> np.ndarray:
-        """World half extents (n, 2) of a corridor box around a waypoint at the headings: the hold
-        box ``T^0 ⊕ footprint`` of every stop point within ``δ/2`` of it (module notes)."""
-        return _world_half(0.5 * self.delta + self.hold + 0.5 * self.length, self.hold_y + 0.5 * self.width,
-                           *headings)
 
 
 class AuthorityGate(JunctionGate):
@@ -235,10 +133,8 @@ class AuthorityGate(JunctionGate):
         #: over the run: token hand-outs taken back because a zone chained to it could not be handed
         #: out in the same round (:meth:`_hand_out`)
         self.chain_revoked = 0
-        #: how far a requester's standing box may lie beyond its current claim box (m): its stop
-        #: point moves by at most δ, plus the largest hold box and a padding allowance
-        self.guard_margin = max((c.delta + c.hold + 0.5 * np.hypot(c.length, c.width) for c in self.classes.values()),
-                                default=0.0) + 10.0
+        #: the keep-out rule (:meth:`_keep_out`)
+        self.keep_out = KeepOut(self.classes)
 
     @staticmethod
     def guard_radius(classes) -> float:
@@ -479,8 +375,7 @@ class AuthorityGate(JunctionGate):
         path = self._wide_path(fleet, row, z, fleet.route(row)[2] + 1)
         if path is None:
             return False
-        lo, hi = path
-        return bool(np.any(np.all((lo <= box[1]) & (hi >= box[0]), axis=1)))
+        return boxes_meet(path[0], path[1], np.asarray(box[0])[None], np.asarray(box[1])[None])
 
     def _yields(self, fleet: JunctionFleet, row: int, z: int, waiters: np.ndarray) -> bool:
         """Row ``row`` lets the other waiters of zone ``z`` go first when its wide path beyond its stop
@@ -548,6 +443,14 @@ class AuthorityGate(JunctionGate):
         req = super().withhold(t, fleet, requesting, new_lo, new_hi)
         return self._keep_out(fleet, req)
 
+    def _keep_out(self, fleet: JunctionFleet, req: np.ndarray) -> np.ndarray:
+        """The requests that stay after :class:`tm.keep_out.KeepOut` (the holders' wide paths kept
+        clear of vehicles coming to stand in them), counted as withheld."""
+        out, n = self.keep_out.apply(fleet, req, self.holders, self._wide_path, self._on_route)
+        self.requests_withheld += n
+        self.wide_withheld += n
+        return out
+
     def _note_still(self, t: int, fleet: JunctionFleet) -> None:
         """Every holder's stop point at step ``t``, for :meth:`_stalled`."""
         pos = dict(zip(fleet.ids, range(len(fleet.ids))))
@@ -590,95 +493,6 @@ class AuthorityGate(JunctionGate):
             return False
         self.stalled_passed += 1
         return True
-
-    def _keep_out(self, fleet: JunctionFleet, req: np.ndarray) -> np.ndarray:
-        """Withhold the requests whose requested stop point's standing box
-        (:meth:`AuthorityReach.hold_box`, padded) meets a zone ``z`` holder's :meth:`_wide_path`
-        from its stop point on while their current one does not: of vehicles without ``z``'s
-        token, and of those on the holder's route (its queue, ``z`` holders that follow it through
-        included), for which the path counts from the waypoint after the holder's stop point (a
-        queue closes up to the holder, not into the claims its turn swings back).  Other ``z``
-        holders are exempt (their corridors miss this one's).  Nobody comes to stand in claims a
-        holder still has to make to leave the guard.  (It does not help against one that stood
-        there before the token was handed out: a hand-out rule refusing the token then, tried on
-        ``grid`` seed 1, refused every waiter of a busy junction, each standing in another's wide
-        path: 94 of 150 arrived.)"""
-        ids = fleet.ids
-        pos = dict(zip(ids, range(len(ids))))
-        r = np.flatnonzero(req)
-        if not len(r):
-            return req
-        out = req.copy()
-        # the holders' paths and the requesters near each (by their claims' boxes) ...
-        todo = []
-        for z, hs in enumerate(self.holders):
-            for h in list(hs):
-                row = pos.get(h)
-                if row is None:
-                    continue
-                path = self._wide_path(fleet, row, z, fleet.route(row)[2])
-                if path is None:
-                    continue
-                lo, hi = path
-                m = self.guard_margin
-                near = r[np.all((fleet.claim_lo[r] <= hi.max(axis=0) + m) &
-                                (fleet.claim_hi[r] >= lo.min(axis=0) - m), axis=1)]
-                near = near[near != row]
-                if len(near):
-                    todo.append((hs, row, lo, hi, near))
-        if not todo:
-            return out
-        # ... their standing boxes (now, asked for) computed once ...
-        every = np.unique(np.concatenate([t[4] for t in todo]))
-        b_lo, b_hi = self._standing_boxes(fleet, every)
-        at = np.full(len(ids), -1, dtype=np.intp)
-        at[every] = np.arange(len(every))
-        # ... then holder by holder, requests withheld by one holder no longer count for the next
-        for hs, row, lo, hi, near in todo:
-            near = near[out[near]]
-            if not len(near):
-                continue
-            co = set(pos[v] for v in hs if v in pos)
-            q = at[near]  # (n, 2, m): the standing boxes now and asked for against each box of the path
-            hits = np.all((b_lo[q][:, :, None, :] <= hi[None, None]) & (b_hi[q][:, :, None, :] >= lo[None, None]),
-                          axis=3)
-            withheld = []
-            for j, hit in zip(near.tolist(), hits):
-                if not hit[1].any():  # the asked-for box misses the whole path
-                    continue
-                if self._on_route(fleet, row, np.array([j]), ahead=1)[0]:
-                    hit = hit[:, 1:]  # its queue: the path after the holder's stop point
-                elif j in co:
-                    continue
-                if hit[1].any() and not hit[0].any():
-                    withheld.append(j)
-            if withheld:
-                out[withheld] = False
-                self.requests_withheld += len(withheld)
-                self.wide_withheld += len(withheld)
-        return out
-
-    def _standing_boxes(self, fleet: JunctionFleet, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """World boxes ``(lo, hi)`` (n, 2, 2) of ``rows`` standing (padded :meth:`AuthorityReach.hold_box`)
-        at their stop points and at the next waypoints."""
-        n = len(rows)
-        if not n:
-            return np.zeros((0, 2, 2)), np.zeros((0, 2, 2))
-        routes = [fleet.route(j) for j in rows.tolist()]
-        k = np.array([r[2] for r in routes], dtype=np.intp)
-        last = np.array([len(r[0]) - 1 for r in routes], dtype=np.intp)
-        idx = np.stack([k, np.minimum(k + 1, last)], axis=1)               # (n, 2)
-        nxt = np.minimum(idx + 1, last[:, None])
-        Wp = np.stack([r[0][i] for r, i in zip(routes, idx)])            # (n, 2, 2)
-        Ha = np.stack([r[1][i] for r, i in zip(routes, idx)]).ravel()    # (2n,)
-        Hb = np.stack([r[1][i] for r, i in zip(routes, nxt)]).ravel()
-        pad = fleet.pad_rows(np.repeat(rows, 2), idx.ravel())
-        b_lo, b_hi = np.empty((2 * n, 2)), np.empty((2 * n, 2))
-        fam = np.repeat(np.asarray(fleet.family)[rows], 2)
-        for c in np.unique(fam).tolist():
-            m = fam == c
-            b_lo[m], b_hi[m] = self.classes[c].hold_box(pad[m], Ha[m], Hb[m])
-        return Wp + b_lo.reshape(n, 2, 2), Wp + b_hi.reshape(n, 2, 2)
 
     def route_through(self, fleet: JunctionFleet, row: int, z: int):
         """``(key, slot, lo, hi)``: exit slot and corridor of row ``row`` through zone ``z``'s guard.

@@ -59,7 +59,7 @@ from collections.abc import Callable, Mapping
 import numpy as np
 
 from controllers.tolerances import GEOMETRY_TOL
-from tm.authority_gate import AuthorityReach
+from tm.authority_reach import AuthorityReach
 from tm.geometry import convex_hull, intersect_sat
 from tm.pedestrians import PedestrianRule, point_polygon_distance
 

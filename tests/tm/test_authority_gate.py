@@ -20,7 +20,8 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from tm.authority_gate import AuthorityGate, AuthorityReach
+from tm.authority_gate import AuthorityGate
+from tm.authority_reach import AuthorityReach
 from tm.boxes import boxes_meet
 from tm.junctions import JunctionFleet, Zone
 

@@ -29,7 +29,7 @@ import numpy as np
 import pytest
 from hypothesis import assume, given, settings, strategies as st
 
-from tm.authority_gate import AuthorityReach
+from tm.authority_reach import AuthorityReach
 from tm.crossing_gate import CrossingGate
 from tm.pedestrians import PedestrianRule, PedestrianSettings
 from tm.reach import ReachClaims
