@@ -143,7 +143,19 @@ def tm_reach_table(csv: Path = RESULTS / "tm_reach.csv") -> str:
     return "\n".join(lines)
 
 
-TABLES = {"traffic": traffic_table, "scale": scale_table, "scenarios": scenarios_table, "tm_reach": tm_reach_table}
+def admission_table(csv: Path = RESULTS / "admission.csv") -> str:
+    """What a vehicle costs once, at admission: each part, the new method against the one it replaced."""
+    df = pd.read_csv(csv)
+    lines = ["| part | method | routes | waypoints (median) | ms per route (median) | ms (all routes) | × the new |",
+             "| --- | --- | --- | --- | --- | --- | --- |"]
+    for _, r in df.iterrows():
+        lines.append(f"| {r['part']} | {r['method']} | {int(r['routes'])} | {_count(r['waypoints_median'])} "
+                     f"| {_f(r['ms_median'], 1)} | {_f(r['ms_total'], 0)} | {_f(r['ratio_to_new'], 2)} |")
+    return "\n".join(lines)
+
+
+TABLES = {"traffic": traffic_table, "scale": scale_table, "scenarios": scenarios_table, "tm_reach": tm_reach_table,
+          "admission": admission_table}
 
 
 def render(text: str) -> str:

@@ -2,7 +2,7 @@
 
 In ``--controller authority`` mode a vehicle's current waypoint ``c`` is its stop point: denied
 from now on, it comes to rest in ``T^0(c)`` and its footprint stays in the *hold box*
-``T^0(c) ⊕ footprint`` (:meth:`tm.authority_gate.AuthorityReach.hold_half`).  The pedestrian
+``T^0(c) ⊕ footprint`` (:meth:`tm.authority_reach.AuthorityReach.hold_half`).  The pedestrian
 rule (:mod:`tm.pedestrians`) withholds every request whose claim a pedestrian can reach, so a
 vehicle whose stop point had moved onto a crossing stopped there when persons came near; SUMO's
 persons then wait for the vehicle standing on their crossing, and its claims stay within their
@@ -26,7 +26,7 @@ The rule, like a junction entry (:mod:`tm.authority_gate`):
   - **no pedestrian can reach the run before the vehicle has cleared it**: every pedestrian is
     farther than ``reach(H) + jump_m`` with ``H = (x - e) + N + hold_steps`` from ``G`` and from
     every walking region of the pedestrian rule (walking areas too) that the run's claim boxes
-    meet (:meth:`tm.authority_gate.AuthorityReach.claim_half` at the waypoints ``e .. x``: a
+    meet (:meth:`tm.authority_reach.AuthorityReach.claim_half` at the waypoints ``e .. x``: a
     walking area beside the crossing that the claims' across half-width reaches).
 
 Why ``H``: after entry the stop point moves one waypoint per grant, ``x - e`` grants until it
@@ -236,7 +236,7 @@ class CrossingGate:
 
     def _walks_along(self, vclass: str, W: np.ndarray, H: np.ndarray, e: int, x: int) -> np.ndarray:
         """The pedestrian rule's walking regions (m, k, 2) that the claim boxes at waypoints ``e .. x``
-        meet (:meth:`~tm.authority_gate.AuthorityReach.claim_half`)."""
+        meet (:meth:`~tm.authority_reach.AuthorityReach.claim_half`)."""
         R = self.rule.regions
         if not len(R):
             return R
