@@ -86,8 +86,7 @@ from tm.junctions import JunctionFleet, JunctionGate
 from tm.keep_out import KeepOut
 from tm.stalls import StallClock
 
-__all__ = ["AuthorityReach", "AuthorityGate"]
-
+__all__ = ["AuthorityReach", "AuthorityGate"]  # AuthorityReach: re-exported from tm.authority_reach
 
 
 class AuthorityGate(JunctionGate):
