@@ -45,7 +45,7 @@ class KeepOut:
     def apply(self, fleet: JunctionFleet, req: np.ndarray, holders: Sequence[dict],
               wide_path: Callable, on_route: Callable) -> tuple[np.ndarray, int]:
         """Withhold the requests whose requested stop point's standing box
-        (:meth:`AuthorityReach.hold_box`, padded) meets a zone ``z`` holder's :meth:`_wide_path`
+        (:meth:`AuthorityReach.hold_box`, padded) meets a zone ``z`` holder's wide path (``wide_path``)
         from its stop point on while their current one does not: of vehicles without ``z``'s
         token, and of those on the holder's route (its queue, ``z`` holders that follow it through
         included), for which the path counts from the waypoint after the holder's stop point (a
@@ -93,9 +93,8 @@ class KeepOut:
                 if path is None:
                     continue
                 lo, hi = path
-                m = self.margin
-                near = r[np.all((fleet.claim_lo[r] <= hi.max(axis=0) + m) &
-                                (fleet.claim_hi[r] >= lo.min(axis=0) - m), axis=1)]
+                near = r[np.all((fleet.claim_lo[r] <= hi.max(axis=0) + self.margin) &
+                                (fleet.claim_hi[r] >= lo.min(axis=0) - self.margin), axis=1)]
                 near = near[near != row]
                 if len(near):
                     todo.append((hs, row, lo, hi, near))
