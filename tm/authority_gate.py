@@ -438,8 +438,9 @@ class AuthorityGate(JunctionGate):
     def withhold(self, t: int, fleet: JunctionFleet, requesting: np.ndarray, new_lo: np.ndarray,
                  new_hi: np.ndarray) -> np.ndarray:
         """:meth:`JunctionGate.withhold`, then the holders' paths kept clear (:meth:`_keep_out`)."""
-        self._note_still(t, fleet)
-        req = super().withhold(t, fleet, requesting, new_lo, new_hi)
+        pos = self._rows_by_id(fleet)  # one id -> row map for the step's stall clock and tokens
+        self._note_still(t, fleet, pos)
+        req = self._withhold(t, fleet, pos, requesting, new_lo, new_hi)
         return self._keep_out(fleet, req)
 
     def _keep_out(self, fleet: JunctionFleet, req: np.ndarray) -> np.ndarray:
@@ -450,9 +451,9 @@ class AuthorityGate(JunctionGate):
         self.wide_withheld += n
         return out
 
-    def _note_still(self, t: int, fleet: JunctionFleet) -> None:
-        """Every holder's stop point at step ``t``, for :meth:`_stalled`."""
-        pos = dict(zip(fleet.ids, range(len(fleet.ids))))
+    def _note_still(self, t: int, fleet: JunctionFleet, pos: dict[str, int]) -> None:
+        """Every holder's stop point at step ``t``, for :meth:`_stalled` (``pos``: vehicle id -> row
+        in ``fleet``, :meth:`JunctionGate._rows_by_id`)."""
         self._still.note(t, ((h, fleet.route(pos[h])[2]) for hs in self.holders for h in hs if h in pos))
 
     def _stalled(self, t: int, holder: str) -> bool:

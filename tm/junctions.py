@@ -253,9 +253,18 @@ class JunctionGate:
             The requests that stay: every request but those whose new claim reaches a
             guard its current claim is not in, without that zone's token.
         """
-        cur_lo, cur_hi, ids = fleet.claim_lo, fleet.claim_hi, fleet.ids
-        n = len(ids)
-        pos = dict(zip(ids, range(n)))
+        return self._withhold(t, fleet, self._rows_by_id(fleet), requesting, new_lo, new_hi)
+
+    @staticmethod
+    def _rows_by_id(fleet: JunctionFleet) -> dict[str, int]:
+        """Vehicle id -> its row in ``fleet`` (the last row, should an id repeat)."""
+        return dict(zip(fleet.ids, range(len(fleet.ids))))
+
+    def _withhold(self, t: int, fleet: JunctionFleet, pos: dict[str, int], requesting: np.ndarray,
+                  new_lo: np.ndarray, new_hi: np.ndarray) -> np.ndarray:
+        """:meth:`withhold` with ``pos`` (:meth:`_rows_by_id` of ``fleet``) built by the caller, who
+        may use it for its own work in the same step (:meth:`tm.authority_gate.AuthorityGate.withhold`)."""
+        cur_lo, cur_hi = fleet.claim_lo, fleet.claim_hi
         self._release(pos, cur_lo, cur_hi)
         req = np.array(requesting, dtype=bool)
         r = np.flatnonzero(req)

@@ -481,13 +481,6 @@ def test_holders_corridors_never_meet_and_only_holders_stop_inside(case):
             assert not inside or v in gate.holders[0], (v, k[v])
 
 
-def test_bad_extents_are_named():
-    with pytest.raises(ValueError, match=r"AuthorityReach: extents must be finite and >= 0 m.*'across': -1.0"):
-        AuthorityReach(hold=0.2, hold_y=0.2, across=-1.0, length=4.0, width=1.8, delta=1.0)
-    with pytest.raises(ValueError, match=r"AuthorityReach: .*delta > 0"):
-        AuthorityReach(hold=0.2, hold_y=0.2, across=1.0, length=4.0, width=1.8, delta=0.0)
-
-
 def _turn_scene(k_f: int, right_pad: float, f_holds: bool = False):
     """T (truck) holds the token at the last waypoint before its right turn into the north arm; F
     (car) queues behind it on the same lanes, stop point ``k_f``, asking for ``k_f + 1``.  T's
