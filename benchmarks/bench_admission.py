@@ -15,7 +15,9 @@ trips routed by duarouter (``make_demand``), each route's waypoints at most 1 m 
 * ``pad_table`` / ``all_rows`` against ``lane_by_lane``: a car's path-frame padding table (a
   car's box, 40 m back to 1.2 m ahead, offsets +-0.95 m), SUMO's bodies at its 0.1 m samples
   computed every row at once (:class:`bridge.body_fleet.FleetBodies`) against lane by lane (the
-  same arrays: checked here).
+  same arrays: checked here).  Since the table takes its samples block by block through
+  ``FleetBodies.corners_at_offsets`` (``benchmarks/bench_pads.py``), ``lane_by_lane`` replaces that
+  call only: the rest of the table is the new code in both rows.
 
 Prints and writes the median and total ms per route, the median waypoints and each method's ratio
 to the new one.
@@ -35,6 +37,7 @@ import pandas as pd
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from bridge.body_fleet import FleetBodies  # noqa: E402
 from bridge.groups import _headings  # noqa: E402
 from bridge.sumo_body import RouteBody, _at, _project  # noqa: E402
 from bridge.waypoints import load_net  # noqa: E402
@@ -101,10 +104,18 @@ def bodies_lane_by_lane(b, sigma, e):
 BOX = ((-40.0, -0.95), (1.2, 0.95))
 
 
+def corners_lane_by_lane(fleet, row, sigma, offsets):
+    """``FleetBodies.corners_at_offsets`` of a route's own fleet of one (how a :class:`PadTable` asks
+    for its samples' bodies) through :func:`bodies_lane_by_lane`, one offset after the other."""
+    b = next(iter(fleet._bodies.values()))
+    cs = [bodies_lane_by_lane(b, sigma, np.full(len(sigma), ev))[3] for ev in offsets]
+    return [(np.stack([c[:, i, 0] for c in cs]), np.stack([c[:, i, 1] for c in cs])) for i in range(4)]
+
+
 def pad_tables(net, R, reference: bool):
-    saved = RouteBody.bodies
-    if reference:
-        RouteBody.bodies = bodies_lane_by_lane
+    saved = FleetBodies.corners_at_offsets
+    if reference:  # the PadTable asks its route's fleet of one for its samples' bodies
+        FleetBodies.corners_at_offsets = corners_lane_by_lane
     try:
         ms, tables = [], []
         for r in R:
@@ -114,7 +125,7 @@ def pad_tables(net, R, reference: bool):
             ms.append(1e3 * (time.perf_counter() - t0))
         return np.array(ms), tables
     finally:
-        RouteBody.bodies = saved
+        FleetBodies.corners_at_offsets = saved
 
 
 def routes(junctions: int, vehicles: int, seed: int, work: Path):

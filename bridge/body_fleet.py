@@ -30,13 +30,27 @@ __all__ = ["FleetBodies"]
 _SHIFT_GAP_M = 1.0
 #: How many lanes behind its front lane SUMO's back may lie (as :meth:`RouteBody.bodies`).
 _BEHIND_STEPS = 8
+#: The segment quantities :class:`_Ragged` keeps per point when asked to (``per_segment``).
+_SEG_KEYS = ("Dx", "Dy", "Tx", "Ty", "ln2", "sq", "Ux", "Uy")
+
+
+def _log2_ceil(k: np.ndarray) -> np.ndarray:
+    """``ceil(log2(max(k, 1)))`` of integers ``k``: the bit length of ``max(k, 1) - 1``."""
+    return np.frexp((np.maximum(k, 1) - 1).astype(float))[1].astype(np.intp)
 
 
 class _Ragged:
     """Polylines concatenated: points ``P`` (q, 2), own arc positions ``A`` (q,), shifted arc
-    positions ``G`` (increasing over all), and per polyline ``start``, ``count``, ``base``."""
+    positions ``G`` (increasing over all), and per polyline ``start``, ``count``, ``base``.
 
-    def __init__(self, lines: list[tuple[np.ndarray, np.ndarray]]) -> None:
+    The searches work on x and y arrays (one pass per operation, not (rows, 2) arrays and sums over
+    their short last axis) and take each segment's quantities (:meth:`_segments`: its unit tangent,
+    squared length, ...) by the same operations as :func:`bridge.sumo_body._at` and ``_project``
+    took them per row, so the same floats.  ``per_segment``: computed once for every segment here
+    (polylines queried many times per point: a route's own :class:`bridge.sumo_body.PadTable`, the
+    lanes) instead of per row (a fleet's routes, each queried once a step)."""
+
+    def __init__(self, lines: list[tuple[np.ndarray, np.ndarray]], per_segment: bool = False) -> None:
         count = np.array([len(p) for p, _ in lines], dtype=np.intp)
         self.start = np.concatenate([[0], np.cumsum(count)[:-1]]).astype(np.intp) if len(lines) else count
         self.count = count
@@ -45,11 +59,39 @@ class _Ragged:
         span = np.array([a[-1] for _, a in lines]) + _SHIFT_GAP_M if lines else np.zeros(0)
         self.base = np.concatenate([[0.0], np.cumsum(span)[:-1]]) if lines else span
         self.G = self.A + np.repeat(self.base, count)
+        self.Px, self.Py = self.P[:, 0], self.P[:, 1]
+        #: per polyline: ceil(log2(its segment count)) (:meth:`nearest_xy`'s groups)
+        self.group = _log2_ceil(count - 1)
+        self.segs = None
+        if per_segment:
+            self.segs = dict(zip(_SEG_KEYS, self._segments(np.arange(len(self.A), dtype=np.intp), _SEG_KEYS)))
+
+    def _segments(self, i, keys):
+        """Per global point index ``i`` (any shape), quantities ``keys`` of its segment: ``Dx, Dy``
+        (to the next point), :meth:`at`'s unit tangent ``Tx, Ty`` (``d / |d|``, ``d`` where ``|d| = 0``),
+        :meth:`nearest`'s squared length ``ln2`` (at least 1e-18), its root ``sq`` and ``Ux, Uy``
+        (``d / sq``); the last point of all: a zero segment, never read."""
+        if self.segs is not None:
+            return [self.segs[k][i] for k in keys]
+        j = np.minimum(i + 1, len(self.A) - 1)
+        dx, dy = self.Px[j] - self.Px[i], self.Py[j] - self.Py[i]
+        got = dict(Dx=dx, Dy=dy)
+        if "Tx" in keys:
+            n = np.hypot(dx, dy)
+            nz = np.where(n > 0, n, 1.0)
+            got.update(Tx=dx / nz, Ty=dy / nz)
+        if {"ln2", "sq", "Ux"} & set(keys):
+            got["ln2"] = np.maximum(dx * dx + dy * dy, 1e-18)
+            got["sq"] = sq = np.sqrt(got["ln2"])
+            got.update(Ux=dx / sq, Uy=dy / sq)
+        return [got[k] for k in keys]
 
     def search(self, row, s, side: str) -> np.ndarray:
         """Per row: ``np.searchsorted(A_row, s, side)`` on the row's own arc positions (0 .. count)."""
         st, cn = self.start[row], self.count[row]
-        i = np.clip(np.searchsorted(self.G, self.base[row] + s, side=side) - st, 0, cn)
+        i = np.minimum(np.maximum(np.searchsorted(self.G, self.base[row] + s, side=side) - st, 0), cn)
+        if len(self.count) == 1:  # one polyline, not shifted (G is A): nothing to correct
+            return i
         A = self.A
         if side == "right":  # i = how many of the row's arcs are <= s
             up = lambda i: (i < cn) & (A[np.minimum(st + i, len(A) - 1)] <= s)  # noqa: E731
@@ -69,55 +111,87 @@ class _Ragged:
             i = i - m
         return i
 
+    def at_xy(self, row, s, single=None):
+        """Points (x, y), unit tangents (x, y) and global segment indices at arc positions ``s``
+        (clipped), as :func:`bridge.sumo_body._at` on each row's polyline.  ``single`` (n,) bool, when
+        known: the rows whose polyline is one segment (no search: its only segment)."""
+        st, cn = self.start[row], self.count[row]
+        s = np.clip(np.asarray(s, dtype=float), 0.0, self.A[st + cn - 1])
+        if single is None:
+            i = st + np.minimum(np.maximum(self.search(row, s, "right") - 1, 0), cn - 2)
+        else:
+            i = st.copy()
+            m = np.flatnonzero(~single)
+            if len(m):
+                i[m] = st[m] + np.minimum(np.maximum(self.search(row[m], s[m], "right") - 1, 0), cn[m] - 2)
+        tx, ty = self._segments(i, ("Tx", "Ty"))
+        ds = s - self.A[i]
+        return self.Px[i] + tx * ds, self.Py[i] + ty * ds, tx, ty, i
+
     def at(self, row, s):
         """Points, unit tangents and global segment indices at arc positions ``s`` (clipped), as
         :func:`bridge.sumo_body._at` on each row's polyline."""
-        st, cn = self.start[row], self.count[row]
-        s = np.clip(np.asarray(s, dtype=float), 0.0, self.A[st + cn - 1])
-        i = st + np.clip(self.search(row, s, "right") - 1, 0, cn - 2)
-        d = self.P[i + 1] - self.P[i]
-        n = np.hypot(d[:, 0], d[:, 1])
-        t = d / np.where(n > 0, n, 1.0)[:, None]
-        return self.P[i] + t * (s - self.A[i])[:, None], t, i
+        x, y, tx, ty, i = self.at_xy(row, s)
+        return np.column_stack([x, y]), np.column_stack([tx, ty]), i
 
     def nearest(self, i0, i1, p):
         """Arc positions and signed offsets (left +) of points ``p`` (n, 2) on the segments between
         global point indices ``i0`` and ``i1`` (exclusive, at least two points), as
-        :func:`bridge.sumo_body._project` without a window.  Rows are taken in groups of like
-        segment counts (up to 1, 2, 4, 8, ...): a row's arrays are as wide as its group's longest
-        polyline, not the longest of all (most lanes are one straight segment; a junction's
-        internal lanes have a few, a curved road's dozens)."""
-        nseg = i1 - i0 - 1
-        if len(nseg) and int(nseg.max()) > 1:
-            grp = np.ceil(np.log2(np.maximum(nseg, 1))).astype(np.intp)
-            if grp.min() != grp.max():
-                sigma, e = np.empty(len(p)), np.empty(len(p))
-                for g in np.unique(grp).tolist():
-                    r = np.flatnonzero(grp == g)
-                    sigma[r], e[r] = self._nearest(i0[r], i1[r], p[r], nseg[r])
-                return sigma, e
-        return self._nearest(i0, i1, p, nseg)
+        :func:`bridge.sumo_body._project` without a window."""
+        p = np.asarray(p, dtype=float).reshape(-1, 2)
+        return self.nearest_xy(i0, i1, p[:, 0].copy(), p[:, 1].copy())
 
-    def _nearest(self, i0, i1, p, nseg):
+    def nearest_xy(self, i0, i1, px, py, grp=None):
+        """:meth:`nearest` of points ``(px, py)``, shape ``(..., n)`` (a row's polyline the same along
+        the leading axes).  Rows are taken in groups of like segment counts (1, 2, up to 4, 8, ...;
+        ``grp`` (n,), when known: ``ceil(log2(segments))``): a row's arrays are as wide as its group's
+        longest polyline, not the longest of all (most lanes are one straight segment, taken for
+        every row first; a junction's internal lanes have a few, a curved road's dozens)."""
+        nseg = i1 - i0 - 1
+        if len(nseg) and (grp is not None or int(nseg.max()) > 1):
+            if grp is None:
+                grp = _log2_ceil(nseg)
+            present = np.flatnonzero(np.bincount(grp))
+            if len(present) > 1:
+                if present[0] == 0:  # every row as if one segment; the longer ones' rows replaced
+                    sigma, e = self._nearest(i0, i1, px, py, np.minimum(nseg, 1))
+                    present = present[1:]
+                else:
+                    sigma, e = np.empty(np.shape(px)), np.empty(np.shape(px))
+                for g in present.tolist():
+                    r = np.flatnonzero(grp == g)
+                    sigma[..., r], e[..., r] = self._nearest(i0[r], i1[r], px[..., r], py[..., r], nseg[r])
+                return sigma, e
+        return self._nearest(i0, i1, px, py, nseg)
+
+    def _nearest(self, i0, i1, px, py, nseg):
+        # the operations of sumo_body._project, component by component: (w . d) = wx dx + wy dy, as
+        # numpy sums an axis of two; the first of equal distances (argmin)
         M = int(nseg.max(initial=0))
-        J = i0[:, None] + np.arange(M)[None, :]
+        if M <= 1:  # one segment each: no search
+            J = i0
+            dx, dy, ln2, sq, ux, uy = self._segments(J, ("Dx", "Dy", "ln2", "sq", "Ux", "Uy"))
+            ax, ay = self.Px[J], self.Py[J]
+            u = np.clip(((px - ax) * dx + (py - ay) * dy) / ln2, 0.0, 1.0)
+            qx, qy = ax + u * dx, ay + u * dy
+            return self.A[J] + u * sq, ux * (py - qy) - uy * (px - qx)
+        J = i0[:, None] + np.arange(M)[None, :]  # (n, M)
         valid = J < (i1 - 1)[:, None]
         J = np.where(valid, J, i0[:, None])
-        a = self.P[J]
-        d = self.P[J + 1] - a
-        ln2 = np.maximum((d ** 2).sum(axis=2), 1e-18)
-        w = p[:, None, :] - a
-        u = np.clip((w * d).sum(axis=2) / ln2, 0.0, 1.0)
-        q = a + u[..., None] * d
-        dist = np.hypot(p[:, None, 0] - q[..., 0], p[:, None, 1] - q[..., 1])
-        dist = np.where(valid, dist, np.inf)
-        j = np.argmin(dist, axis=1)
-        r = np.arange(len(p))
-        jj, lj = J[r, j], ln2[r, j]
-        sigma = self.A[jj] + u[r, j] * np.sqrt(lj)
-        t = d[r, j] / np.sqrt(lj)[:, None]
-        e = t[:, 0] * (p[:, 1] - q[r, j, 1]) - t[:, 1] * (p[:, 0] - q[r, j, 0])
-        return sigma, e
+        dx, dy, ln2 = self._segments(J, ("Dx", "Dy", "ln2"))
+        ax, ay = self.Px[J], self.Py[J]
+        pxm, pym = px[..., None], py[..., None]  # (..., n, 1) against (n, M)
+        u = np.clip(((pxm - ax) * dx + (pym - ay) * dy) / ln2, 0.0, 1.0)
+        qx, qy = ax + u * dx, ay + u * dy
+        dist = np.where(valid, np.hypot(pxm - qx, pym - qy), np.inf)
+        j = np.argmin(dist, axis=-1)[..., None]
+
+        def pick(a):
+            return np.take_along_axis(np.broadcast_to(a, dist.shape), j, axis=-1)[..., 0]
+
+        uj, qxj, qyj, jj = pick(u), pick(qx), pick(qy), pick(J)
+        sq, ux, uy = self._segments(jj, ("sq", "Ux", "Uy"))
+        return self.A[jj] + uj * sq, ux * (py - qyj) - uy * (px - qxj)
 
 
 class FleetBodies:
@@ -125,10 +199,14 @@ class FleetBodies:
 
     :meth:`add` a vehicle's body when it enters and :meth:`remove` it when it leaves; the ragged
     arrays are rebuilt on the next query after a change (a few ms at 1,000 routes), the lanes'
-    shapes are kept for the run (a network's lanes are few).
+    shapes are kept for the run (a network's lanes are few).  ``route_segments``: keep the routes'
+    segment quantities for all their segments (:class:`_Ragged`; a route asked about many more
+    positions than it has points, as a :class:`bridge.sumo_body.PadTable` asks its own) instead of
+    computing them for the rows asked about (a fleet, once a step per vehicle).
     """
 
-    def __init__(self) -> None:
+    def __init__(self, route_segments: bool = False) -> None:
+        self._route_segments = bool(route_segments)
         self._bodies: dict[str, RouteBody] = {}
         self._lane_id: dict[str, int] = {}
         self._lane_lines: list[tuple[np.ndarray, np.ndarray]] = []
@@ -154,8 +232,8 @@ class FleetBodies:
         if self._built is None:
             vids = list(self._bodies)
             bodies = [self._bodies[v] for v in vids]
-            routes = _Ragged([(b.poly, b.parc) for b in bodies])
-            lanes = _Ragged(self._lane_lines)
+            routes = _Ragged([(b.poly, b.parc) for b in bodies], self._route_segments)
+            lanes = _Ragged(self._lane_lines, True)
             # per route: its lanes (global ids) and the lane behind each (route-local, -1 none);
             # per polyline point: the route-local lane of the segment starting there
             nl = np.array([len(b.lanes) for b in bodies], dtype=np.intp)
@@ -167,7 +245,8 @@ class FleetBodies:
             self._built = dict(row={v: i for i, v in enumerate(vids)}, bodies=bodies, routes=routes, lanes=lanes,
                                lstart=lstart, lane_ids=lane_ids, behind=behind, seg_lane=seg_lane,
                                length=np.array([b.length for b in bodies]), width=np.array([b.width for b in bodies]),
-                               lane_len=np.array(self._lane_len), scale=np.array(self._lane_scale))
+                               lane_len=np.array(self._lane_len), scale=np.array(self._lane_scale),
+                               lane_single=lanes.count == 2)
         return self._built
 
     def rows(self, ids) -> np.ndarray:
@@ -214,34 +293,80 @@ class FleetBodies:
     def bodies_of_rows(self, row, sigma, e):
         """:meth:`bodies` of the vehicles at rows ``row`` (n,) of the arrays (:meth:`rows`; a body
         alone, :meth:`RouteBody.bodies`: all 0)."""
-        B = self._arrays()
         row = np.asarray(row, dtype=np.intp).reshape(-1)
-        R, La = B["routes"], B["lanes"]
         sigma = np.asarray(sigma, dtype=float).reshape(-1)
         e = np.broadcast_to(np.asarray(e, dtype=float), sigma.shape)
-        L = B["length"][row]
-        q, t, seg = R.at(row, sigma + 0.5 * L)
-        front = q + e[:, None] * np.column_stack([-t[:, 1], t[:, 0]])
-        kloc = B["seg_lane"][seg]
+        qx, qy, tx, ty, kloc = self._fronts(row, sigma)
+        fx, fy = qx + e * -ty, qy + e * tx
+        bx, by = self._backs(row, kloc, fx, fy)
+        corners = np.empty((len(sigma), 4, 2))
+        for c, (cx, cy) in enumerate(self._corners(row, fx, fy, bx, by)):
+            corners[:, c, 0], corners[:, c, 1] = cx, cy
+        return np.column_stack([fx, fy]), np.column_stack([bx, by]), kloc, corners
+
+    def corners_at_offsets(self, row, sigma, offsets):
+        """The corners of :meth:`bodies_of_rows` for every row at each offset of ``offsets`` (k,): four
+        ``(x, y)``, each of shape (k, n), counter-clockwise from the front right one.  The fronts'
+        positions on the routes are found once for all offsets, and what depends on a row's lane
+        only once for all its offsets (a :class:`bridge.sumo_body.PadTable` asks for three at every
+        sample)."""
+        row = np.asarray(row, dtype=np.intp).reshape(-1)
+        sigma = np.asarray(sigma, dtype=float).reshape(-1)
+        qx, qy, tx, ty, kloc = self._fronts(row, sigma)
+        ev = np.asarray(offsets, dtype=float).reshape(-1, 1)
+        fx, fy = qx + ev * -ty, qy + ev * tx  # (k, n)
+        bx, by = self._backs(row, kloc, fx, fy)
+        return self._corners(row, fx, fy, bx, by)
+
+    def route_at(self, row, sigma):
+        """Points ``x, y`` and unit tangents ``tx, ty`` of the vehicles' routes at arc positions
+        ``sigma`` (clipped): :func:`bridge.sumo_body._at` on each route."""
+        return self._arrays()["routes"].at_xy(row, sigma)[:4]
+
+    def _fronts(self, row, sigma):
+        """Where the fronts of reference points at arc ``sigma`` lie on their routes (offset 0): ``x,
+        y``, the route's unit tangent there ``tx, ty`` and the route-local lane of its segment."""
+        B = self._arrays()
+        qx, qy, tx, ty, seg = B["routes"].at_xy(row, sigma + 0.5 * B["length"][row])
+        return qx, qy, tx, ty, B["seg_lane"][seg]
+
+    def _backs(self, row, kloc, fx, fy):
+        """SUMO's back points (x, y) of fronts ``(fx, fy)``, shape ``(..., n)``, of rows ``row`` on their
+        route-local lanes ``kloc`` (n,): the front's lane position and lateral offset on its lane,
+        ``length`` lane units back along it and the lanes behind it (each row only while its back is
+        not found), at the same offset."""
+        B = self._arrays()
+        La, lane_ids, scale = B["lanes"], B["lane_ids"], B["scale"]
         ls = B["lstart"][row]
-        g = B["lane_ids"][ls + kloc]
-        s, lat = La.nearest(La.start[g], La.start[g] + La.count[g], front)
-        scale, lane_len = B["scale"], B["lane_len"]
-        rem = s / scale[g] - L
-        cur = kloc.copy()
-        for _ in range(_BEHIND_STEPS):
-            prev = B["behind"][ls + cur]
-            go = (rem < 0) & (prev >= 0)
-            if not go.any():
+        g = lane_ids[ls + kloc]
+        s, lat = La.nearest_xy(La.start[g], La.start[g] + La.count[g], fx, fy, La.group[g])
+        rem = (s / scale[g] - B["length"][row]).reshape(-1)
+        n = len(row)
+        cur = np.empty(s.shape, dtype=np.intp)
+        cur[...] = kloc
+        cur = cur.reshape(-1)
+        act = np.flatnonzero(rem < 0)
+        for _ in range(_BEHIND_STEPS):  # rows whose back lies on a lane behind: walk back
+            if not len(act):
                 break
-            cur = np.where(go, prev, cur)
-            rem = np.where(go, rem + lane_len[B["lane_ids"][ls + cur]], rem)
-        gc = B["lane_ids"][ls + cur]
-        pt, tt, _ = La.at(gc, rem * scale[gc])
-        back = pt + lat[:, None] * np.column_stack([-tt[:, 1], tt[:, 0]])
-        axis = front - back
-        n = np.hypot(axis[:, 0], axis[:, 1])
-        u = axis / np.where(n > 0, n, 1.0)[:, None]
-        side = 0.5 * B["width"][row][:, None] * np.column_stack([-u[:, 1], u[:, 0]])
-        corners = np.stack([front - side, front + side, back + side, back - side], axis=1)
-        return front, back, kloc, corners
+            prev = B["behind"][ls[act % n] + cur[act]]
+            act = act[prev >= 0]
+            if not len(act):
+                break
+            cur[act] = prev[prev >= 0]
+            rem[act] = rem[act] + B["lane_len"][lane_ids[ls[act % n] + cur[act]]]
+            act = act[rem[act] < 0]
+        gc = lane_ids[(ls + cur.reshape(s.shape)).reshape(-1)]
+        px, py, tx, ty, _ = La.at_xy(gc, rem * scale[gc], B["lane_single"][gc])
+        lat = lat.reshape(-1)
+        return (px + lat * -ty).reshape(s.shape), (py + lat * tx).reshape(s.shape)
+
+    def _corners(self, row, fx, fy, bx, by):
+        """The box of width ``W`` around ``back -> front``: its corners ``(x, y)`` counter-clockwise
+        from the front right one."""
+        ax, ay = fx - bx, fy - by
+        n = np.hypot(ax, ay)
+        nz = np.where(n > 0, n, 1.0)
+        hw = 0.5 * self._arrays()["width"][row]
+        sx, sy = hw * -(ay / nz), hw * (ax / nz)
+        return [(fx - sx, fy - sy), (fx + sx, fy + sy), (bx + sx, by + sy), (bx - sx, by - sy)]

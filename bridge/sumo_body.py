@@ -78,6 +78,11 @@ _PROJECT_CHUNK = 256
 
 #: Samples per block when a path-frame table computes its samples' reach (bounds its arrays).
 _REACH_CHUNK = 4096
+#: Samples per block when a :class:`PadTable` computes its samples' bodies (three rows each).
+#: Measured (20 routes of ``benchmarks/bench_scale.py``'s 1,000-vehicle grid, road frame, best of 3
+#: each, two rounds): median 6.8 ms per table at 8192 against 7.2 ms at 4096; 16384 and a whole route
+#: at once (tens of thousands of samples) no faster.
+_BODY_CHUNK = 8192
 
 #: SUMO's POSITION_EPS (m): the least shape length MSLane's length-geometry factor takes.
 _POSITION_EPS = 0.1
@@ -154,14 +159,51 @@ def window_starts(grids: np.ndarray, sigma_lo: np.ndarray) -> np.ndarray:
     return np.where(nan, last, j)  # NaN sorts last
 
 
+def _rowmax(a: np.ndarray) -> np.ndarray:
+    """``a.max(axis=1)`` of an (m, k) array, column by column (k passes over m; numpy's reduction over
+    a short last axis runs an inner loop per row, several times slower)."""
+    out = a[:, 0].copy()
+    for i in range(1, a.shape[1]):
+        np.maximum(out, a[:, i], out=out)
+    return out
+
+
+def _max_norm(d: np.ndarray) -> np.ndarray:
+    """``np.hypot(d[..., 0], d[..., 1]).max(axis=1)`` of an (m, k, 2) array, the same floats; a row
+    whose vectors are all zero is 0 without ``hypot`` (``hypot(+-0, +-0) = +0``): most rows of a
+    :class:`PadTable`'s changes between samples, where a straight lane's body keeps its offsets
+    exactly, and ``hypot`` costs ten times a product."""
+    x, y = d[..., 0], d[..., 1]
+    out = np.zeros(len(d))
+    rows = np.flatnonzero(_rowmax((x != 0) | (y != 0)))  # NaN != 0 too
+    if len(rows):
+        out[rows] = _rowmax(np.hypot(x[rows], y[rows]))
+    return out
+
+
 def _sample_reach(rel: np.ndarray, heading: np.ndarray, step: np.ndarray) -> np.ndarray:
     """How far bodies reach from their positions (back, front, right, left; (4, m)) in frames at
-    ``heading`` (m,): ``rel`` (m, 3, 4, 2) the corners relative to the positions, ``step`` (m,) added."""
-    c, s = np.cos(heading)[:, None, None], np.sin(heading)[:, None, None]
-    ra = c * rel[..., 0] + s * rel[..., 1]   # corners relative to the position, along the frame
-    ry = -s * rel[..., 0] + c * rel[..., 1]  # and across (left +)
-    return np.array([(-ra).max(axis=(1, 2)), ra.max(axis=(1, 2)),
-                     (-ry).max(axis=(1, 2)), ry.max(axis=(1, 2))]) + step  # back, front, right, left
+    ``heading`` (m,): ``rel`` (m, 3, 4, 2) the corners relative to the positions, ``step`` (m,) added.
+    The corners are taken as (12, m) arrays (each maximum over a sample's 12 corners then runs along
+    the samples); a reach behind or to the right is minus the least coordinate (the largest of
+    minus them: the same float, ``+ step`` making any zero +0)."""
+    m, k = len(rel), rel.shape[1] * rel.shape[2]
+    x, y = rel[..., 0].reshape(m, k).T, rel[..., 1].reshape(m, k).T  # (12, m) views
+    c, s = np.cos(heading), np.sin(heading)
+    ra, ry, t = np.empty(x.shape), np.empty(x.shape), np.empty(x.shape)
+    np.multiply(c, x, out=ra)  # corners relative to the position, along the frame: c x + s y
+    np.multiply(s, y, out=t)
+    ra += t
+    np.multiply(-s, x, out=ry)  # and across (left +): -s x + c y
+    np.multiply(c, y, out=t)
+    ry += t
+    out = np.empty((4, m))  # back, front, right, left
+    np.negative(ra.min(axis=0), out=out[0])
+    ra.max(axis=0, out=out[1])
+    np.negative(ry.min(axis=0), out=out[2])
+    ry.max(axis=0, out=out[3])
+    out += step
+    return out
 
 
 class RouteBody:
@@ -257,7 +299,7 @@ class RouteBody:
         if f is None:
             from bridge.body_fleet import FleetBodies  # it imports this module (for its types only)
 
-            f = self._fleet = FleetBodies()
+            f = self._fleet = FleetBodies(route_segments=True)
             f.add("", self)
         return f
 
@@ -363,22 +405,41 @@ class PadTable:
         self.sig = np.linspace(0.0, body.route_length, n)
         self._step = float(self.sig[1]) if n > 1 else 0.0
         self._grid = (self._step, n - 1, float(self.sig[-1]))
-        q, t, _ = _at(body.poly, body.parc, self.sig)
-        nrm = np.column_stack([-t[:, 1], t[:, 0]])
-        rel, ref = [], []
-        for ev in (-e_max, 0.0, e_max):
-            _, _, _, cs = body.bodies(self.sig, np.full(n, ev))
-            p = q + ev * nrm
-            rel.append(cs - p[:, None, :])
-            ref.append(p)
-        self.rel = np.stack(rel, axis=1)  # (n, 3, 4, 2)
-        self.ref = np.stack(ref, axis=1)  # (n, 3, 2)
+        # the three bodies of every sample, block by block (arrays of a few thousand rows: a whole
+        # route's at once, tens of thousands, cost more in fresh memory than in arithmetic)
+        fleet = body._alone()
+        offsets = (-e_max, 0.0, e_max)
+        ev = np.array(offsets)[:, None]
+        self.rel = np.empty((n, 3, 4, 2))  # corners relative to the positions
+        self.ref = np.empty((n, 3, 2))     # the positions
         #: k -> (j_base, (n + 1, 4) suffix maxima of the per-sample pads from j_base on, a zero row last)
         self._suffix: dict[int, tuple[int, np.ndarray, np.ndarray]] = {}
         self.step = np.zeros(n)
+        dd = np.empty(max(n - 1, 0))
+        chord = np.float64(np.inf)  # shortest front-back distance (e = 0)
+        zeros = np.zeros(min(n, _BODY_CHUNK), dtype=np.intp)
+        for a in range(0, n, _BODY_CHUNK):
+            b = min(a + _BODY_CHUNK, n)
+            m = b - a
+            # the positions: path(sig) + e n (sumo_body._at's floats) and the corners of
+            # body.bodies(sig, e) at the three offsets, (m, 3, 4) x and y
+            qx, qy, tx, ty = fleet.route_at(zeros[:m], self.sig[a:b])
+            px, py = qx + ev * -ty, qy + ev * tx  # (3, m)
+            rel, ref = self.rel[a:b], self.ref[a:b]
+            ref[..., 0], ref[..., 1] = px.T, py.T
+            for c, (cx, cy) in enumerate(fleet.corners_at_offsets(zeros[:m], self.sig[a:b], offsets)):
+                rel[:, :, c, 0] = (cx - px).T
+                rel[:, :, c, 1] = (cy - py).T
+            r1 = rel[:, 1]
+            ax = 0.5 * (r1[:, 0, 0] + r1[:, 1, 0] - r1[:, 2, 0] - r1[:, 3, 0])
+            ay = 0.5 * (r1[:, 0, 1] + r1[:, 1, 1] - r1[:, 2, 1] - r1[:, 3, 1])
+            chord = np.minimum(chord, np.hypot(ax, ay).min())
+            # the largest change of a corner from each sample to the next (np.diff's floats)
+            if a > 0:  # from the block before's last sample to this block's first
+                dd[a - 1] = _max_norm((rel[0] - self.rel[a - 1]).reshape(1, 12, 2))[0]
+            if m > 1:
+                dd[a:b - 1] = _max_norm((rel[1:] - rel[:-1]).reshape(m - 1, 12, 2))
         if n > 1:
-            dr = np.diff(self.rel, axis=0)
-            dd = np.hypot(dr[..., 0], dr[..., 1]).max(axis=(1, 2))
             # where the body jumps (the front's lane changes under a lateral offset, a polyline
             # vertex turns the offset's normal) a position between two samples has the body of one
             # side or the other: only the smooth part of the change needs room, at most
@@ -388,8 +449,6 @@ class PadTable:
             seg = np.hypot(d[:, 0], d[:, 1])
             turn = np.abs(np.angle(np.exp(1j * np.diff(np.arctan2(d[:, 1], d[:, 0])))))
             kappa = float((turn / np.maximum(np.minimum(seg[:-1], seg[1:]), SAMPLE_M)).max(initial=0.0))
-            axis = 0.5 * (self.rel[:, 1, 0] + self.rel[:, 1, 1] - self.rel[:, 1, 2] - self.rel[:, 1, 3])
-            chord = np.hypot(axis[:, 0], axis[:, 1]).min()  # shortest front-back distance (e = 0)
             # the back moves up to (largest / smallest lane factor) times as far as the front
             ratio = float(body.scale.max() / body.scale.min())
             lip = ratio * (1.0 + e_max * kappa) * (1.0 + self.width / max(float(chord), 1e-6)) * SAMPLE_M

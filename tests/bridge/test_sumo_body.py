@@ -15,7 +15,7 @@ from hypothesis import HealthCheck, assume, given, settings, strategies as st
 from bridge.demand import PlannedVehicle
 from bridge.groups import _headings
 from bridge.sumo_adapter import SumoAdapter
-from bridge.sumo_body import BACK_M, KINK_SLOP_M, OFFSET_MAX_M, RouteBody, _at, window_starts
+from bridge.sumo_body import BACK_M, KINK_SLOP_M, OFFSET_MAX_M, SAMPLE_M, RouteBody, _at, window_starts
 from bridge.sumo_world import SumoWorld
 from bridge.cosim import VehicleSpec
 from bridge.waypoints import _arc, lane_change_plan, load_net
@@ -185,20 +185,47 @@ def test_padding_tables_are_the_reference_pads(net, edges):
             np.testing.assert_array_equal(table.pads(k, sg), table._pads(k, j0), err_msg=f"k={k} sigma={sg}")
 
 
+def _ref_at(points, arc, s):
+    """``bridge.sumo_body._at`` as written when the reference below was (kept here: the reference
+    must not follow the module's code)."""
+    s = np.clip(np.asarray(s, dtype=float), 0.0, arc[-1])
+    i = np.clip(np.searchsorted(arc, s, side="right") - 1, 0, len(points) - 2)
+    d = points[i + 1] - points[i]
+    n = np.hypot(d[:, 0], d[:, 1])
+    t = d / np.where(n > 0, n, 1.0)[:, None]
+    return points[i] + t * (s - arc[i])[:, None], t, i
+
+
+def _ref_project(points, arc, p):
+    """``bridge.sumo_body._project`` without a window, as written when the reference below was."""
+    a, b = points[:-1], points[1:]
+    d = b - a
+    ln2 = np.maximum((d ** 2).sum(axis=1), 1e-18)
+    w = p[:, None, :] - a[None]
+    u = np.clip((w * d[None]).sum(axis=2) / ln2[None], 0.0, 1.0)
+    q = a[None] + u[..., None] * d[None]
+    dist = np.hypot(p[:, None, 0] - q[..., 0], p[:, None, 1] - q[..., 1])
+    j = np.argmin(dist, axis=1)
+    r = np.arange(len(p))
+    sigma = arc[j] + u[r, j] * np.sqrt(ln2[j])
+    t = d[j] / np.sqrt(ln2[j])[:, None]
+    e = t[:, 0] * (p[:, 1] - q[r, j, 1]) - t[:, 1] * (p[:, 0] - q[r, j, 0])
+    return sigma, e
+
+
 def _bodies_lane_by_lane(b, sigma, e):
     """The reference :meth:`RouteBody.bodies` (its code until it took every row at once through
     :class:`bridge.body_fleet.FleetBodies`): lane by lane, a few numpy calls per lane."""
-    from bridge.sumo_body import _project
     sigma = np.asarray(sigma, dtype=float).reshape(-1)
     e = np.broadcast_to(np.asarray(e, dtype=float), sigma.shape)
     L, half = b.length, 0.5 * b.length
-    q, t, seg = _at(b.poly, b.parc, sigma + half)
+    q, t, seg = _ref_at(b.poly, b.parc, sigma + half)
     front = q + e[:, None] * np.column_stack([-t[:, 1], t[:, 0]])
     lane = b.seg_lane[seg]
     back = np.empty_like(front)
     for k in np.unique(lane):
         rows = np.flatnonzero(lane == k)
-        s, lat = _project(b.shapes[k], b.arcs[k], front[rows])
+        s, lat = _ref_project(b.shapes[k], b.arcs[k], front[rows])
         rem = s / b.scale[k] - L
         cur = np.full(len(rows), k)
         for _ in range(8):
@@ -210,7 +237,7 @@ def _bodies_lane_by_lane(b, sigma, e):
             rem = np.where(go, rem + b.lane_len[cur], rem)
         for c in np.unique(cur):
             sel = cur == c
-            pt, tt, _ = _at(b.shapes[c], b.arcs[c], rem[sel] * b.scale[c])
+            pt, tt, _ = _ref_at(b.shapes[c], b.arcs[c], rem[sel] * b.scale[c])
             back[rows[sel]] = pt + lat[sel, None] * np.column_stack([-tt[:, 1], tt[:, 0]])
     axis = front - back
     n = np.hypot(axis[:, 0], axis[:, 1])
@@ -556,3 +583,183 @@ def test_path_padding_covers_sumo_s_body_at_the_worst_roll_back(net, edges):
                                     size[1] / 2 + pad[:, 2], size[1] / 2 + pad[:, 3])
             inside = points_in_boxes(boxes, np.arange(len(i)), corners[i], 1e-9).any(axis=1)
             assert inside.all(), (size, s_all[i][~inside], n0)
+
+
+# ----------------------------------------------------------------------------- the tables' arrays, exactly
+def _ref_sample_reach(rel, heading, step):
+    """``bridge.sumo_body._sample_reach`` as written when :func:`_ref_pad_arrays` was."""
+    c, s = np.cos(heading)[:, None, None], np.sin(heading)[:, None, None]
+    ra = c * rel[..., 0] + s * rel[..., 1]
+    ry = -s * rel[..., 0] + c * rel[..., 1]
+    return np.array([(-ra).max(axis=(1, 2)), ra.max(axis=(1, 2)), (-ry).max(axis=(1, 2)), ry.max(axis=(1, 2))]) + step
+
+
+def _ref_pad_arrays(b, arc_k, H, box_lo, box_hi, frame):
+    """The arrays of ``PadTable(b, arc_k, W, H, box_lo, box_hi, frame)`` computed as its code did before
+    it took its samples block by block through ``FleetBodies.corners_at_offsets``: the lane-by-lane
+    bodies (:func:`_bodies_lane_by_lane`) of every sample at once, one offset after the other, and
+    the step and the path frame's reach over whole-route arrays."""
+    e_max = min(max(abs(box_lo[1]), abs(box_hi[1])), OFFSET_MAX_M)
+    n = int(np.ceil(b.route_length / SAMPLE_M)) + 1
+    sig = np.linspace(0.0, b.route_length, n)
+    q, t, _ = _ref_at(b.poly, b.parc, sig)
+    nrm = np.column_stack([-t[:, 1], t[:, 0]])
+    rel, ref = [], []
+    for ev in (-e_max, 0.0, e_max):
+        cs = _bodies_lane_by_lane(b, sig, np.full(n, ev))[3]
+        p = q + ev * nrm
+        rel.append(cs - p[:, None, :])
+        ref.append(p)
+    rel, ref = np.stack(rel, axis=1), np.stack(ref, axis=1)
+    step = np.zeros(n)
+    if n > 1:
+        dr = np.diff(rel, axis=0)
+        dd = np.hypot(dr[..., 0], dr[..., 1]).max(axis=(1, 2))
+        d = np.diff(b.poly, axis=0)
+        seg = np.hypot(d[:, 0], d[:, 1])
+        turn = np.abs(np.angle(np.exp(1j * np.diff(np.arctan2(d[:, 1], d[:, 0])))))
+        kappa = float((turn / np.maximum(np.minimum(seg[:-1], seg[1:]), SAMPLE_M)).max(initial=0.0))
+        axis = 0.5 * (rel[:, 1, 0] + rel[:, 1, 1] - rel[:, 1, 2] - rel[:, 1, 3])
+        chord = np.hypot(axis[:, 0], axis[:, 1]).min()
+        ratio = float(b.scale.max() / b.scale.min())
+        lip = ratio * (1.0 + e_max * kappa) * (1.0 + b.width / max(float(chord), 1e-6)) * SAMPLE_M
+        dd = np.minimum(dd, lip)
+        step[:-1] = np.maximum(step[:-1], dd)
+        step[1:] = np.maximum(step[1:], dd)
+    out = dict(sig=sig, rel=rel, ref=ref, step=step)
+    if frame == "path":
+        h = H[np.clip(np.searchsorted(arc_k, sig, side="right"), 1, len(H) - 1)]
+        reach = _ref_sample_reach(rel, h, step).T
+        if len(arc_k) >= 3:  # PadTable._kink_reach
+            turn = np.angle(np.exp(1j * np.diff(H[1:])))
+            kinks = np.flatnonzero(np.abs(turn) > 0.0) + 1
+            for c in kinks.tolist():
+                slop = e_max * np.tan(0.5 * min(abs(turn[c - 1]), 0.5 * np.pi)) + KINK_SLOP_M
+                lo = np.searchsorted(sig, arc_k[c] - slop, side="left")
+                hi = np.searchsorted(sig, arc_k[c] + slop, side="right")
+                j = np.arange(lo, hi)
+                for hh in (H[c], H[c + 1]):
+                    got = _ref_sample_reach(rel[j], np.full(len(j), hh), step[j]).T
+                    reach[j] = np.maximum(reach[j], got)
+        out["_path_reach"] = reach
+    return out
+
+
+def _ref_pads(ref, b, arc_k, W, H, box_lo, box_hi, frame, k, j0):
+    """``PadTable._pads(k, j0)`` (the padding of waypoint ``k`` for the window from sample ``j0``) of the
+    reference arrays ``ref`` (:func:`_ref_pad_arrays`), as its code computed it before."""
+    sig, L = ref["sig"], b.length
+    half = 0.5 * np.array([L, L, b.width, b.width])
+    j1 = int(np.searchsorted(sig, arc_k[k] + box_hi[0] + 2.0 * L, side="right"))
+    if j1 <= j0:
+        return np.zeros(4)
+    if frame == "road":
+        c, s = np.cos(H[k]), np.sin(H[k])
+        d = ref["ref"][j0:j1] - W[k]
+        a, y = c * d[..., 0] + s * d[..., 1], -s * d[..., 0] + c * d[..., 1]
+        inside = ((a >= box_lo[0]) & (a <= box_hi[0]) & (y >= box_lo[1]) & (y <= box_hi[1])).any(axis=1)
+        if not inside.any():
+            return np.zeros(4)
+        reach = _ref_sample_reach(ref["rel"][j0:j1][inside], np.full(int(inside.sum()), H[k]),
+                                  ref["step"][j0:j1][inside])
+    else:
+        a = sig[j0:j1] - arc_k[k]
+        inside = (a >= box_lo[0]) & (a <= box_hi[0])
+        if not inside.any():
+            return np.zeros(4)
+        reach = ref["_path_reach"][j0:j1][inside].T
+    return np.maximum(reach.max(axis=1) - half, 0.0)
+
+
+def _grid6_walks(n):
+    """``n`` routes on SUMO's ``grid6`` demo (curved edges; lanes whose length is not their shape's,
+    length-geometry factors up to 1.39): random walks of up to 8 edges, a car's lanes."""
+    from sumo_nets.sumo_tools import sumo_home
+    from bridge.waypoints import RouteError
+    path = sumo_home() / "tools" / "game" / "grid6" / "grid6.net.xml"
+    if not path.exists():
+        pytest.skip(f"SUMO's grid6 demo is not at {path}")
+    g6 = load_net(path)
+    edges = [x for x in g6.sumolib_net.getEdges() if not x.getID().startswith(":") and x.allows("passenger")]
+    rng, out = np.random.default_rng(5), []
+    while len(out) < n:
+        x = edges[int(rng.integers(len(edges)))]
+        walk = [x.getID()]
+        for _ in range(7):
+            nxt = [y for y in x.getOutgoing() if y.allows("passenger") and y.getID() not in walk]
+            if not nxt:
+                break
+            x = nxt[int(rng.integers(len(nxt)))]
+            walk.append(x.getID())
+        try:
+            out.append(g6.route(walk, 3.0, vclass="passenger", turn_max_deg=45.0))
+        except RouteError:
+            continue
+    return g6, out
+
+
+def _routes_for_exactness(net, which):
+    """(net, [(route, size, box)]) of the exactness tests: the test grid's turns, straights, a
+    three-edge route and a lane change (car, bus and truck, offsets up to the cap), or ``grid6``'s
+    walks (sizes in turn; a car's across extent, 0.95 m, for one in three)."""
+    if which == "grid":
+        cases = []
+        for edges in (LEFT, RIGHT, STRAIGHT, ("A1B1", "B1C1", "C1C2"), ("B2B1", "B1A1"), "lane change"):
+            for size in SIZES:
+                r = _lane_change(net, size)[0] if edges == "lane change" else _route(net, edges)
+                cases.append((r, size, BOX))
+        return net, cases
+    g6, routes = _grid6_walks(6)
+    car = ((-40.0, -0.95), (1.2, 0.95))
+    return g6, [(r, SIZES[i % 3], car if i % 3 == 0 else BOX) for i, r in enumerate(routes)]
+
+
+@pytest.mark.parametrize("frame", ["road", "path"])
+@pytest.mark.parametrize("which", ["grid", "grid6"])
+def test_pad_tables_and_bodies_are_the_reference_exactly(net, which, frame, monkeypatch):
+    """``PadTable`` takes its samples' bodies block by block (``FleetBodies.corners_at_offsets``: the
+    fronts' route positions once for the three offsets, x and y arrays, segment quantities computed
+    once per segment, the back walked only for rows still behind) and its step and reach block by
+    block; ``RouteBody.bodies`` runs on the same code.  Both give the very floats of the straightforward
+    reference (:func:`_bodies_lane_by_lane`, :func:`_ref_pad_arrays`, :func:`_ref_pads`): the arrays
+    ``sig, rel, ref, step`` (road) or ``sig, step, _path_reach`` (path), the bodies (front, back, lane,
+    corners) at every sample and offsets 0, +-e_max and random ones, and the pads of every tenth
+    waypoint for window starts across its box: ``np.array_equal``, no tolerance.  Routes with turns,
+    a lane change's diagonal, junctions' internal lanes, lanes of several segments and, on ``grid6``,
+    lanes whose length-geometry factor is not 1; the blocks made small (257 samples) on half of them so
+    that many block boundaries are crossed."""
+    import bridge.sumo_body as sb
+    g, cases = _routes_for_exactness(net, which)
+    seen = dict(turn=0, off_lane=0, internal=0, multi=0, factor=0, blocks=0)
+    for i, (r, size, box) in enumerate(cases):
+        monkeypatch.setattr(sb, "_BODY_CHUNK", 257 if i % 2 else 2048)
+        b = RouteBody(r, g, *size)
+        W, arc = np.asarray(r.waypoints), np.asarray(r.arc_length)
+        H = _headings(W)
+        table = b.pad_table(arc, W, H, *box, frame=frame)
+        want = _ref_pad_arrays(b, arc, H, *box, frame)
+        keys = ("sig", "rel", "ref", "step") if frame == "road" else ("sig", "step", "_path_reach")
+        for key in keys:
+            got = getattr(table, key)
+            assert got.shape == want[key].shape and got.dtype == want[key].dtype, key
+            np.testing.assert_array_equal(got, want[key], err_msg=f"{key}, case {i}")
+        sig = want["sig"]
+        rng = np.random.default_rng(i)
+        for e in (0.0, -table.offset_max, table.offset_max, rng.uniform(-OFFSET_MAX_M, OFFSET_MAX_M, len(sig))):
+            for got, ref in zip(b.bodies(sig, e), _bodies_lane_by_lane(b, sig, e)):
+                np.testing.assert_array_equal(got, ref, err_msg=f"bodies, case {i}")
+        for k in range(0, len(W), 10):
+            starts = {table.window_start(x) for x in np.linspace(arc[k] - 45.0, arc[k] + 5.0, 9)}
+            for j0 in sorted(starts):
+                np.testing.assert_array_equal(table.pads_at(k, j0), _ref_pads(want, b, arc, W, H, *box, frame, k, j0),
+                                              err_msg=f"pads k={k} j0={j0}, case {i}")
+        d = np.diff(W, axis=0)
+        seen["turn"] += bool(np.any(np.abs(np.angle(np.exp(1j * np.diff(np.arctan2(d[:, 1], d[:, 0]))))) > 0.3))
+        seen["off_lane"] += not b.seg_on.all()
+        seen["internal"] += any(x.startswith(":") for x in b.lanes)
+        seen["multi"] += any(len(x) > 2 for x in b.shapes)
+        seen["factor"] += bool(np.any(np.abs(b.scale - 1.0) > 0.01))
+        seen["blocks"] += len(sig) > sb._BODY_CHUNK
+    # the routes hold what the docstring says they do
+    assert seen["turn"] and seen["internal"] and seen["multi"] and seen["blocks"], seen
+    assert seen["off_lane"] if which == "grid" else seen["factor"], seen
