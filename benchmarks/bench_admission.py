@@ -39,65 +39,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from bridge.body_fleet import FleetBodies  # noqa: E402
 from bridge.groups import _headings  # noqa: E402
-from bridge.sumo_body import RouteBody, _at, _project  # noqa: E402
+from bridge.sumo_body import RouteBody  # noqa: E402
 from bridge.waypoints import load_net  # noqa: E402
 from controllers import path as cpath  # noqa: E402
 from controllers.tolerances import PATH_COLLINEAR_TOL_M  # noqa: E402
 from sumo_nets.generate import make_demand, make_grid  # noqa: E402
-
-
-def merge_loop(P, tol, fixed=None):
-    """The merge before the blocked one: one candidate vertex at a time (numpy calls per point)."""
-    keep = [0]
-    a, n = 0, len(P)
-    j = 1
-    while j < n - 1:
-        d = P[j + 1] - P[a]
-        L = float(np.hypot(d[0], d[1]))
-        ok = L > tol and (fixed is None or not fixed[j])
-        if ok:
-            mid = P[a + 1:j + 1] - P[a]
-            t = mid @ d / L
-            off = np.abs(mid[:, 0] * d[1] - mid[:, 1] * d[0]) / L
-            ok = bool(np.all(off <= tol) and np.all(t > 0.0) and np.all(t < L) and np.all(np.diff(t) > 0.0))
-        if not ok:
-            keep.append(j)
-            a = j
-        j += 1
-    keep.append(n - 1)
-    return np.asarray(keep, dtype=np.intp)
-
-
-def bodies_lane_by_lane(b, sigma, e):
-    """:meth:`RouteBody.bodies` before it took every row at once: lane by lane."""
-    sigma = np.asarray(sigma, dtype=float).reshape(-1)
-    e = np.broadcast_to(np.asarray(e, dtype=float), sigma.shape)
-    L, half = b.length, 0.5 * b.length
-    q, t, seg = _at(b.poly, b.parc, sigma + half)
-    front = q + e[:, None] * np.column_stack([-t[:, 1], t[:, 0]])
-    lane = b.seg_lane[seg]
-    back = np.empty_like(front)
-    for k in np.unique(lane):
-        rows = np.flatnonzero(lane == k)
-        s, lat = _project(b.shapes[k], b.arcs[k], front[rows])
-        rem = s / b.scale[k] - L
-        cur = np.full(len(rows), k)
-        for _ in range(8):
-            prev = b.behind[cur]
-            go = (rem < 0) & (prev >= 0)
-            if not go.any():
-                break
-            cur = np.where(go, prev, cur)
-            rem = np.where(go, rem + b.lane_len[cur], rem)
-        for c in np.unique(cur):
-            sel = cur == c
-            pt, tt, _ = _at(b.shapes[c], b.arcs[c], rem[sel] * b.scale[c])
-            back[rows[sel]] = pt + lat[sel, None] * np.column_stack([-tt[:, 1], tt[:, 0]])
-    axis = front - back
-    n = np.hypot(axis[:, 0], axis[:, 1])
-    u = axis / np.where(n > 0, n, 1.0)[:, None]
-    side = 0.5 * b.width * np.column_stack([-u[:, 1], u[:, 0]])
-    return front, back, lane, np.stack([front - side, front + side, back + side, back - side], axis=1)
+from tests.reference import bodies_lane_by_lane, merge_loop  # noqa: E402
 
 
 #: a car's padding box (path frame): arc from the waypoint and offset (the car's sets, rounded out)
@@ -160,8 +107,11 @@ def main(argv=None) -> pd.DataFrame:
     with tempfile.TemporaryDirectory() as tmp:
         net, R = routes(a.junctions, a.vehicles, a.seed, Path(tmp))
     W_all = [np.asarray(r.waypoints, dtype=float) for r in R]
+    def old_merge(P, tol, fixed=None):  # the loop verbatim (``mid @ d``)
+        return merge_loop(P, tol, fixed, matvec=True)
+
     for W in W_all:
-        if not np.array_equal(cpath._merge_collinear(W, PATH_COLLINEAR_TOL_M), merge_loop(W, PATH_COLLINEAR_TOL_M)):
+        if not np.array_equal(cpath._merge_collinear(W, PATH_COLLINEAR_TOL_M), old_merge(W, PATH_COLLINEAR_TOL_M)):
             raise SystemExit("bench_admission: the two merges keep different vertices on a route")
     wp = float(np.median([len(W) for W in W_all]))
     pad_new, tabs_new = pad_tables(net, R, False)
@@ -170,7 +120,7 @@ def main(argv=None) -> pd.DataFrame:
         if not (np.array_equal(x._path_reach, y._path_reach) and np.array_equal(x.step, y.step)):
             raise SystemExit("bench_admission: the two padding tables differ on a route")
     runs = [("path_frame", "blocked", time_frames(W_all, cpath._merge_collinear)),
-            ("path_frame", "loop", time_frames(W_all, merge_loop)),
+            ("path_frame", "loop", time_frames(W_all, old_merge)),
             ("pad_table", "all_rows", pad_new), ("pad_table", "lane_by_lane", pad_ref)]
     rows = [dict(part=p, method=m, routes=len(W_all), waypoints_median=wp, ms_median=float(np.median(ms)),
                  ms_total=float(ms.sum())) for p, m, ms in runs]

@@ -21,6 +21,7 @@ from bridge.cosim import VehicleSpec
 from bridge.waypoints import _arc, lane_change_plan, load_net
 from controllers.tolerances import POSE_TOL_M
 from tm.geometry import intersect_sat, polygon_distance
+from tests.reference import bodies_lane_by_lane, ref_at
 
 TRUCK = (7.1, 2.4)  # SUMO's vType size of muvsim's truck (a plain box: SUMO's truck shape)
 LEFT = ("A1B1", "B1B2")      # from the west, left turn to the north at B1
@@ -185,67 +186,6 @@ def test_padding_tables_are_the_reference_pads(net, edges):
             np.testing.assert_array_equal(table.pads(k, sg), table._pads(k, j0), err_msg=f"k={k} sigma={sg}")
 
 
-def _ref_at(points, arc, s):
-    """``bridge.sumo_body._at`` as written when the reference below was (kept here: the reference
-    must not follow the module's code)."""
-    s = np.clip(np.asarray(s, dtype=float), 0.0, arc[-1])
-    i = np.clip(np.searchsorted(arc, s, side="right") - 1, 0, len(points) - 2)
-    d = points[i + 1] - points[i]
-    n = np.hypot(d[:, 0], d[:, 1])
-    t = d / np.where(n > 0, n, 1.0)[:, None]
-    return points[i] + t * (s - arc[i])[:, None], t, i
-
-
-def _ref_project(points, arc, p):
-    """``bridge.sumo_body._project`` without a window, as written when the reference below was."""
-    a, b = points[:-1], points[1:]
-    d = b - a
-    ln2 = np.maximum((d ** 2).sum(axis=1), 1e-18)
-    w = p[:, None, :] - a[None]
-    u = np.clip((w * d[None]).sum(axis=2) / ln2[None], 0.0, 1.0)
-    q = a[None] + u[..., None] * d[None]
-    dist = np.hypot(p[:, None, 0] - q[..., 0], p[:, None, 1] - q[..., 1])
-    j = np.argmin(dist, axis=1)
-    r = np.arange(len(p))
-    sigma = arc[j] + u[r, j] * np.sqrt(ln2[j])
-    t = d[j] / np.sqrt(ln2[j])[:, None]
-    e = t[:, 0] * (p[:, 1] - q[r, j, 1]) - t[:, 1] * (p[:, 0] - q[r, j, 0])
-    return sigma, e
-
-
-def _bodies_lane_by_lane(b, sigma, e):
-    """The reference :meth:`RouteBody.bodies` (its code until it took every row at once through
-    :class:`bridge.body_fleet.FleetBodies`): lane by lane, a few numpy calls per lane."""
-    sigma = np.asarray(sigma, dtype=float).reshape(-1)
-    e = np.broadcast_to(np.asarray(e, dtype=float), sigma.shape)
-    L, half = b.length, 0.5 * b.length
-    q, t, seg = _ref_at(b.poly, b.parc, sigma + half)
-    front = q + e[:, None] * np.column_stack([-t[:, 1], t[:, 0]])
-    lane = b.seg_lane[seg]
-    back = np.empty_like(front)
-    for k in np.unique(lane):
-        rows = np.flatnonzero(lane == k)
-        s, lat = _ref_project(b.shapes[k], b.arcs[k], front[rows])
-        rem = s / b.scale[k] - L
-        cur = np.full(len(rows), k)
-        for _ in range(8):
-            prev = b.behind[cur]
-            go = (rem < 0) & (prev >= 0)
-            if not go.any():
-                break
-            cur = np.where(go, prev, cur)
-            rem = np.where(go, rem + b.lane_len[cur], rem)
-        for c in np.unique(cur):
-            sel = cur == c
-            pt, tt, _ = _ref_at(b.shapes[c], b.arcs[c], rem[sel] * b.scale[c])
-            back[rows[sel]] = pt + lat[sel, None] * np.column_stack([-tt[:, 1], tt[:, 0]])
-    axis = front - back
-    n = np.hypot(axis[:, 0], axis[:, 1])
-    u = axis / np.where(n > 0, n, 1.0)[:, None]
-    side = 0.5 * b.width * np.column_stack([-u[:, 1], u[:, 0]])
-    return front, back, lane, np.stack([front - side, front + side, back + side, back - side], axis=1)
-
-
 @pytest.mark.parametrize("size", SIZES)
 @pytest.mark.parametrize("edges", [LEFT, RIGHT, STRAIGHT, ("A1B1", "B1C1", "C1C2"), ("B2B1", "B1A1"), "lane change"])
 def test_bodies_all_rows_at_once_are_the_lane_by_lane_bodies(net, edges, size):
@@ -261,7 +201,7 @@ def test_bodies_all_rows_at_once_are_the_lane_by_lane_bodies(net, edges, size):
     rng = np.random.default_rng(7)
     sig = np.concatenate([np.arange(-2.0, b.route_length + 2.0, 0.1), rng.uniform(0.0, b.route_length, 300)])
     for e in (0.0, -OFFSET_MAX_M, OFFSET_MAX_M, rng.uniform(-OFFSET_MAX_M, OFFSET_MAX_M, len(sig))):
-        got, want = b.bodies(sig, e), _bodies_lane_by_lane(b, sig, e)
+        got, want = b.bodies(sig, e), bodies_lane_by_lane(b, sig, e)
         for g, w in zip(got, want):
             np.testing.assert_array_equal(g, w)
 
@@ -597,16 +537,16 @@ def _ref_sample_reach(rel, heading, step):
 def _ref_pad_arrays(b, arc_k, H, box_lo, box_hi, frame):
     """The arrays of ``PadTable(b, arc_k, W, H, box_lo, box_hi, frame)`` computed as its code did before
     it took its samples block by block through ``FleetBodies.corners_at_offsets``: the lane-by-lane
-    bodies (:func:`_bodies_lane_by_lane`) of every sample at once, one offset after the other, and
+    bodies (:func:`bodies_lane_by_lane`) of every sample at once, one offset after the other, and
     the step and the path frame's reach over whole-route arrays."""
     e_max = min(max(abs(box_lo[1]), abs(box_hi[1])), OFFSET_MAX_M)
     n = int(np.ceil(b.route_length / SAMPLE_M)) + 1
     sig = np.linspace(0.0, b.route_length, n)
-    q, t, _ = _ref_at(b.poly, b.parc, sig)
+    q, t, _ = ref_at(b.poly, b.parc, sig)
     nrm = np.column_stack([-t[:, 1], t[:, 0]])
     rel, ref = [], []
     for ev in (-e_max, 0.0, e_max):
-        cs = _bodies_lane_by_lane(b, sig, np.full(n, ev))[3]
+        cs = bodies_lane_by_lane(b, sig, np.full(n, ev))[3]
         p = q + ev * nrm
         rel.append(cs - p[:, None, :])
         ref.append(p)
@@ -721,7 +661,7 @@ def test_pad_tables_and_bodies_are_the_reference_exactly(net, which, frame, monk
     fronts' route positions once for the three offsets, x and y arrays, segment quantities computed
     once per segment, the back walked only for rows still behind) and its step and reach block by
     block; ``RouteBody.bodies`` runs on the same code.  Both give the very floats of the straightforward
-    reference (:func:`_bodies_lane_by_lane`, :func:`_ref_pad_arrays`, :func:`_ref_pads`): the arrays
+    reference (:func:`bodies_lane_by_lane`, :func:`_ref_pad_arrays`, :func:`_ref_pads`): the arrays
     ``sig, rel, ref, step`` (road) or ``sig, step, _path_reach`` (path), the bodies (front, back, lane,
     corners) at every sample and offsets 0, +-e_max and random ones, and the pads of every tenth
     waypoint for window starts across its box: ``np.array_equal``, no tolerance.  Routes with turns,
@@ -746,7 +686,7 @@ def test_pad_tables_and_bodies_are_the_reference_exactly(net, which, frame, monk
         sig = want["sig"]
         rng = np.random.default_rng(i)
         for e in (0.0, -table.offset_max, table.offset_max, rng.uniform(-OFFSET_MAX_M, OFFSET_MAX_M, len(sig))):
-            for got, ref in zip(b.bodies(sig, e), _bodies_lane_by_lane(b, sig, e)):
+            for got, ref in zip(b.bodies(sig, e), bodies_lane_by_lane(b, sig, e)):
                 np.testing.assert_array_equal(got, ref, err_msg=f"bodies, case {i}")
         for k in range(0, len(W), 10):
             starts = {table.window_start(x) for x in np.linspace(arc[k] - 45.0, arc[k] + 5.0, 9)}

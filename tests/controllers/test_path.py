@@ -12,6 +12,7 @@ from hypothesis import assume, given, settings, strategies as st
 from controllers.path import PathError, PathFrame
 from controllers.tolerances import PATH_COLLINEAR_TOL_M
 from tests.polylines import random_polyline
+from tests.reference import merge_loop
 
 TOL = 1e-9
 seeds = st.integers(0, 2**32 - 1)
@@ -63,29 +64,6 @@ def test_duplicates_merge_reversals_do_not():
     assert b.n_segments == 2 and b.length == pytest.approx(2.0)
 
 
-def _merge_loop(P, tol, fixed=None, matvec=False):
-    """The candidate-at-a-time loop :func:`controllers.path._merge_collinear` replaced (the reference):
-    with ``matvec`` verbatim (``mid @ d``), else with the fast version's elementwise products."""
-    keep = [0]
-    a, n = 0, len(P)
-    j = 1
-    while j < n - 1:
-        d = P[j + 1] - P[a]
-        L = float(np.hypot(d[0], d[1]))
-        ok = L > tol and (fixed is None or not fixed[j])
-        if ok:
-            mid = P[a + 1:j + 1] - P[a]
-            t = mid @ d / L if matvec else (mid[:, 0] * d[0] + mid[:, 1] * d[1]) / L
-            off = np.abs(mid[:, 0] * d[1] - mid[:, 1] * d[0]) / L
-            ok = bool(np.all(off <= tol) and np.all(t > 0.0) and np.all(t < L) and np.all(np.diff(t) > 0.0))
-        if not ok:
-            keep.append(j)
-            a = j
-        j += 1
-    keep.append(n - 1)
-    return np.asarray(keep, dtype=np.intp)
-
-
 def _subsampled(rng, n_seg):
     """A route as the bridge makes it: a random polyline with every segment subsampled about 1 m
     apart (long collinear runs), some points nudged across by about the tolerance."""
@@ -114,7 +92,7 @@ def test_blocked_merge_keeps_the_vertices_the_loop_keeps(seed, n_seg, p_fixed):
     fixed = rng.random(len(W)) < p_fixed
     for fx in (None, fixed):
         np.testing.assert_array_equal(_merge_collinear(W, PATH_COLLINEAR_TOL_M, fx),
-                                      _merge_loop(W, PATH_COLLINEAR_TOL_M, fx))
+                                      merge_loop(W, PATH_COLLINEAR_TOL_M, fx))
 
 
 def test_blocked_merge_keeps_the_vertices_of_the_old_matvec_loop_on_routes():
@@ -127,7 +105,7 @@ def test_blocked_merge_keeps_the_vertices_of_the_old_matvec_loop_on_routes():
         W = _subsampled(rng, int(rng.integers(2, 20)))
         W = W[np.concatenate([[True], np.hypot(*np.diff(W, axis=0).T) > 1e-9])]
         np.testing.assert_array_equal(_merge_collinear(W, PATH_COLLINEAR_TOL_M),
-                                      _merge_loop(W, PATH_COLLINEAR_TOL_M, matvec=True))
+                                      merge_loop(W, PATH_COLLINEAR_TOL_M, matvec=True))
 
 
 def test_the_frame_is_immutable():
