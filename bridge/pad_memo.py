@@ -6,7 +6,11 @@ ahead of them, which move only when the world places its bodies (``world.pads_ve
 those moves).  A step asks for the same padding several times (current claims, requested ones,
 the tube-escape check, admissions, the monitor's claims); :class:`PadMemo` keeps the last answer
 per (group, waypoint offset) and asks the world again only for the rows whose waypoint changed
-(a grant), or for all rows after the windows moved or the group's vehicles changed.
+(a grant), or for all rows after the windows moved or the group's vehicles changed.  A world that
+also tells, per row, the run of window starts the row holds for (``claim_pad_runs``) and each
+vehicle's window start (``pad_windows``) is asked, after the windows moved, only for the rows whose
+window start left its run: most rows of a step (a row is a maximum over the positions ahead, the
+same while the one that sets it stays ahead).
 """
 
 from __future__ import annotations
@@ -42,24 +46,44 @@ class PadMemo:
         n = len(ids)
         ver = getattr(self.world, "pads_version", None)
         last = self._last.get((key, offset))
-        if ver is not None and last is not None and last[0] == ver and last[1] is ids and len(last[2]) == n:
+        same = ver is not None and last is not None and last[1] is ids and len(last[2]) == n
+        runs = None
+        if same and last[0] == ver:
             diff = np.flatnonzero(last[2] != k)
-            if not len(diff):
-                self.served += n
-                return last[3]
-            got = self._ask([ids[i] for i in diff.tolist()], k[diff])
+        elif same and last[4] is not None:  # the windows moved: the rows whose start left its run
+            j0 = self.world.pad_windows(ids)
+            diff = np.flatnonzero((last[2] != k) | (j0 < last[4][0]) | (j0 > last[4][1]))
+        else:
+            diff = None
+        if diff is None:
+            pads, runs = self._ask(ids, k)
+            self.asked += n
+        elif not len(diff) and last[0] == ver:
+            self.served += n
+            return last[3]
+        else:
             pads = last[3].copy()
-            pads[diff] = got
+            runs = None if last[4] is None else (last[4][0].copy(), last[4][1].copy())
+            if len(diff):
+                got, got_runs = self._ask([ids[i] for i in diff.tolist()], k[diff])
+                pads[diff] = got
+                if runs is not None and got_runs is not None:
+                    runs[0][diff], runs[1][diff] = got_runs
+                else:
+                    runs = None
             self.asked += len(diff)
             self.served += n - len(diff)
-        else:
-            pads = self._ask(ids, k)
-            self.asked += n
         if ver is not None:
             pads.setflags(write=False)  # handed out again: nobody may change it
-            self._last[(key, offset)] = (ver, ids, k.copy(), pads)
+            self._last[(key, offset)] = (ver, ids, k.copy(), pads, runs)
         return pads
 
-    def _ask(self, ids, k) -> np.ndarray:
+    def _ask(self, ids, k) -> tuple[np.ndarray, tuple | None]:
+        """``(pads (n, 4), runs)``: ``runs`` the rows' ``(j_lo, j_hi)`` when the world tells them."""
+        if hasattr(self.world, "claim_pad_runs") and hasattr(self.world, "pad_windows"):
+            got = self.world.claim_pad_runs(ids, k)
+            if got is not None:
+                return np.asarray(got[0], dtype=float).reshape(len(ids), 4), (got[1], got[2])
         got = self.world.claim_pads(ids, k)
-        return np.zeros((len(ids), 4)) if got is None else np.asarray(got, dtype=float).reshape(len(ids), 4)
+        return (np.zeros((len(ids), 4)) if got is None
+                else np.asarray(got, dtype=float).reshape(len(ids), 4)), None

@@ -461,7 +461,9 @@ class PadTable:
             # not needed (a tenth of the memory: 24 floats a sample down to 4)
             seg = np.searchsorted(self.arc_k, self.sig, side="right")
             h = self.H[np.clip(seg, 1, len(self.H) - 1)]
-            self._path_reach = np.empty((n, 4))
+            # stored (4, n) (``_path_reach`` is its (n, 4) view): pads_many reduces along the samples
+            self._reach_T = np.empty((4, n))
+            self._path_reach = self._reach_T.T
             for a in range(0, n, _REACH_CHUNK):
                 b = min(a + _REACH_CHUNK, n)
                 self._path_reach[a:b] = _sample_reach(self.rel[a:b], h[a:b], self.step[a:b]).T
@@ -524,6 +526,46 @@ class PadTable:
         base, S, last = tab
         i = min(j0 - base, len(S) - 1)
         return S[i], (sys.maxsize if i == len(S) - 1 else base + int(last[i]))
+
+    def pads_many(self, ks, j0: int) -> np.ndarray:
+        """:meth:`pads_at` ``(k, j0)`` for every ``k`` of ``ks`` (m,), one window start, as ``(m, 4)``:
+        the same floats.  A path-frame table takes them in a few array calls (a waypoint's pads are
+        a maximum of the reach over one contiguous run of samples: ``np.maximum.reduceat``), builds
+        no suffix table and keeps nothing; a road-frame one asks :meth:`pads_run` per waypoint."""
+        ks = np.clip(np.asarray(ks, dtype=np.intp).reshape(-1), 0, len(self.W) - 1)
+        if self.frame != "path":
+            return np.array([self.pads_run(k, j0)[0] for k in ks.tolist()]).reshape(len(ks), 4)
+        out = np.zeros((len(ks), 4))
+        if not len(ks):
+            return out
+        sig, arc = self.sig, self.arc_k[ks]
+        # the samples of _table(k, j0): j >= j0 with box_lo <= sig[j] - arc_k[k] <= box_hi (a run: the
+        # rounded difference does not decrease along sig; _table's own bound, box_hi + 2 L, lies past
+        # it); searchsorted on arc + bound, then the rounding's +-1 settled on the very comparison
+        # _reach makes
+        lo = np.searchsorted(sig, arc + self.box_lo[0], side="left")
+        hi = np.searchsorted(sig, arc + self.box_hi[0], side="right")
+        n = len(sig)
+        for _ in range(2):
+            lo = np.where((lo > 0) & (sig[np.maximum(lo - 1, 0)] - arc >= self.box_lo[0]), lo - 1, lo)
+            lo = np.where((lo < n) & (sig[np.minimum(lo, n - 1)] - arc < self.box_lo[0]), lo + 1, lo)
+            hi = np.where((hi < n) & (sig[np.minimum(hi, n - 1)] - arc <= self.box_hi[0]), hi + 1, hi)
+            hi = np.where((hi > 0) & (sig[np.maximum(hi - 1, 0)] - arc > self.box_hi[0]), hi - 1, hi)
+        a = np.maximum(lo, j0)
+        b = hi
+        ok = a < b
+        if not ok.any():
+            return out
+        a, b = a[ok], b[ok]
+        idx = np.empty(2 * len(a), dtype=np.intp)
+        idx[0::2], idx[1::2] = a, b
+        reach = self._reach_T
+        if idx.max() >= reach.shape[1]:  # reduceat's indices must lie inside the array: a range ends it
+            reach = np.hstack([reach, np.zeros((4, 1))])
+        m = np.maximum.reduceat(reach, idx, axis=1)[:, 0::2]
+        half = 0.5 * np.array([self.length, self.length, self.width, self.width])
+        out[ok] = np.maximum(m.T - half, 0.0)
+        return out
 
     def window_start(self, sigma_lo: float) -> int:
         """The first sample a window starting at arc ``sigma_lo`` counts: the last one at or before

@@ -168,7 +168,41 @@ class SumoWorld:
         """The claims' padding (n, 4), one-sided (:meth:`bridge.sumo_body.PadTable.pads`), of vehicles
         ``ids`` for their waypoints ``k`` (n,), for the positions still ahead of them (from the
         furthest reference point reached, less :data:`~bridge.sumo_body.BACK_M`); None without the
-        network's geometry.
+        network's geometry.  :meth:`claim_pad_runs` without the runs; one vehicle's many waypoints
+        (the junction gate's paths) in one go (:meth:`~bridge.sumo_body.PadTable.pads_many`)."""
+        if self.net is None:
+            return None
+        n = len(ids)
+        if n > 1 and list(ids).count(ids[0]) == n:
+            t = self._pads.get(ids[0])
+            if t is None:
+                return np.zeros((n, 4))
+            return t.pads_many(k, int(self.pad_windows(ids[:1])[0]))
+        return self.claim_pad_runs(ids, k)[0]
+
+    def pad_windows(self, ids) -> np.ndarray:
+        """The first sample (int64, (n,)) of each vehicle's padding window (-1 without a table): the
+        last one at or before its furthest reference point less ``BACK_M``
+        (:func:`bridge.sumo_body.window_starts`), kept until that point moves."""
+        pads, j0s = self._pads, self._j0
+        out = np.fromiter((j0s.get(v, -2) for v in ids), dtype=np.int64, count=len(ids))
+        miss = np.flatnonzero(out == -2)
+        if len(miss):
+            tabs = [pads.get(ids[i]) for i in miss.tolist()]
+            todo = [(i, t) for i, t in zip(miss.tolist(), tabs) if t is not None]
+            out[miss] = -1
+            if todo:  # PadTable.window_start of the vehicles without one, all at once
+                top = self._top
+                sig = [top.get(ids[i], t.arc_k[0]) - BACK_M for i, t in todo]
+                got = window_starts([t.grid for _, t in todo], sig)
+                j0s.update(zip((ids[i] for i, _ in todo), got.tolist()))
+                out[[i for i, _ in todo]] = got
+        return out
+
+    def claim_pad_runs(self, ids, k) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(pads, j_lo, j_hi)``: :meth:`claim_pads` (n, 4) and, per row, the window starts
+        ``[j_lo, j_hi]`` (int64) it holds for (:meth:`pad_windows`: while a vehicle's window start
+        stays in them and its ``k`` is the same, so is its row; ``-1, -1`` without a table).
 
         A row depends on the vehicle's table, ``k`` and the window's first sample ``j0``; ``j0``
         moves only when the furthest point reached passes a sample, ``k`` only at a grant, and the
@@ -178,34 +212,28 @@ class SumoWorld:
         until its furthest point moves: a step's many lookups (current and requested waypoints,
         the junction gate, the tube-escape check, the monitor's claims) read a table only when
         the padding may have changed."""
-        if self.net is None:
-            return None
-        pads, j0s, memo = self._pads, self._j0, self._pad_rows
+        pads, memo = self._pads, self._pad_rows
         n = len(ids)
         out = np.zeros((n, 4))
+        j_lo = np.full(n, -1, dtype=np.int64)
+        j_hi = np.full(n, -1, dtype=np.int64)
         kk = np.asarray(k).reshape(-1).tolist()
-        tabs = [pads.get(v) for v in ids]
-        todo = [i for i, (v, t) in enumerate(zip(ids, tabs)) if t is not None and v not in j0s]
-        if todo:  # PadTable.window_start of the vehicles without one, all at once
-            top = self._top
-            sig = [top.get(ids[i], tabs[i].arc_k[0]) - BACK_M for i in todo]
-            j0s.update(zip((ids[i] for i in todo), window_starts([tabs[i].grid for i in todo], sig).tolist()))
-        for i, (v, t) in enumerate(zip(ids, tabs)):
-            if t is None:
+        for i, (v, j, ki) in enumerate(zip(ids, self.pad_windows(ids).tolist(), kk)):
+            if j < 0:
                 continue
-            j, ki = j0s[v], kk[i]
             rows = memo.get(v)
             if rows is None:
                 rows = memo[v] = {}
             got = rows.get(ki)
             if got is None or not got[0] <= j <= got[1]:
-                row, j1 = t.pads_run(ki, j)
+                row, j1 = pads[v].pads_run(ki, j)
                 got = (j, j1, row)
                 if ki not in rows and len(rows) >= _PAD_ROWS_KEPT:
                     del rows[min(rows)]  # waypoints left behind (a vehicle's k only grows)
                 rows[ki] = got
             out[i] = got[2]
-        return out
+            j_lo[i], j_hi[i] = got[0], got[1]
+        return out, j_lo, j_hi
 
     def _poses(self, ids, centre):
         """SUMO's bodies for reference points ``centre`` (see :mod:`bridge.sumo_body`), all vehicles at

@@ -115,6 +115,7 @@ class AuthorityGate(JunctionGate):
         super().__init__(zones, classes)
         #: vehicle id -> its route's intervals through the guards (:meth:`intervals`)
         self._spans: dict[str, tuple] = {}
+        self._span_runs: dict[str, list] = {}  # vehicle id -> its intervals as tuples (:meth:`_span_of`)
         #: over the run: requests withheld because their stop point would stand in a holder's path
         #: (:meth:`_keep_out`)
         self.wide_withheld = 0
@@ -184,9 +185,15 @@ class AuthorityGate(JunctionGate):
         """``(entry, exit, exits)`` of zone ``z``'s first interval not left before waypoint
         ``target`` (the one holding it, or the next one: a chained zone's, :meth:`_wanting`), or
         None."""
-        zs, e, x, ex = self.intervals(fleet, row)
-        hit = np.flatnonzero((zs == z) & (target <= x))
-        return None if not len(hit) else (int(e[hit[0]]), int(x[hit[0]]), bool(ex[hit[0]]))
+        vid = fleet.ids[row]
+        runs = self._span_runs.get(vid)
+        if runs is None:  # the intervals as Python tuples: a few per route, asked for thousands of times a step
+            zs, e, x, ex = self.intervals(fleet, row)
+            runs = self._span_runs[vid] = list(zip(zs.tolist(), e.tolist(), x.tolist(), ex.tolist()))
+        for zz, en, xx, exits in runs:
+            if zz == z and target <= xx:
+                return en, xx, bool(exits)
+        return None
 
     def _wanting(self, fleet: JunctionFleet, r: np.ndarray, new_lo: np.ndarray,
                  new_hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -198,6 +205,7 @@ class AuthorityGate(JunctionGate):
         if len(self._spans) > 4 * len(ids) + 1000:  # vehicles gone: drop their routes
             live = set(ids)
             self._spans = {v: sp for v, sp in self._spans.items() if v in live}
+            self._span_runs = {v: sp for v, sp in self._span_runs.items() if v in live}
         spans = [self.intervals(fleet, i) for i in r.tolist()]  # cached per vehicle
         cnt = np.array([len(sp[0]) for sp in spans], dtype=np.intp)
         if not cnt.sum():

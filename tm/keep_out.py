@@ -82,22 +82,29 @@ class KeepOut:
         if not len(r):
             return req, 0
         out = req.copy()
-        # the holders' paths and the requesters near each (by their claims' boxes) ...
-        todo = []
+        # the holders' paths and the requesters near each (by their claims' boxes, all at once) ...
+        paths = []
         for z, hs in enumerate(holders):
             for h in list(hs):
                 row = pos.get(h)
                 if row is None:
                     continue
                 path = wide_path(fleet, row, z, fleet.route(row)[2])
-                if path is None:
-                    continue
-                lo, hi = path
-                near = r[np.all((fleet.claim_lo[r] <= hi.max(axis=0) + self.margin) &
-                                (fleet.claim_hi[r] >= lo.min(axis=0) - self.margin), axis=1)]
-                near = near[near != row]
-                if len(near):
-                    todo.append((hs, row, lo, hi, near))
+                if path is not None:
+                    paths.append((hs, row, *path))
+        if not paths:
+            return out, 0
+        p_lo = np.array([p[2].min(axis=0) for p in paths]) - self.margin   # (P, 2)
+        p_hi = np.array([p[3].max(axis=0) for p in paths]) + self.margin
+        c_lo, c_hi = fleet.claim_lo[r], fleet.claim_hi[r]
+        close = ((c_lo[None, :, 0] <= p_hi[:, None, 0]) & (c_lo[None, :, 1] <= p_hi[:, None, 1]) &
+                 (c_hi[None, :, 0] >= p_lo[:, None, 0]) & (c_hi[None, :, 1] >= p_lo[:, None, 1]))  # (P, R)
+        todo = []
+        for (hs, row, lo, hi), m in zip(paths, close):
+            near = r[m]
+            near = near[near != row]
+            if len(near):
+                todo.append((hs, row, lo, hi, near))
         if not todo:
             return out, 0
         # ... their standing boxes (now, asked for) computed once ...

@@ -703,3 +703,64 @@ def test_pad_tables_and_bodies_are_the_reference_exactly(net, which, frame, monk
     # the routes hold what the docstring says they do
     assert seen["turn"] and seen["internal"] and seen["multi"] and seen["blocks"], seen
     assert seen["off_lane"] if which == "grid" else seen["factor"], seen
+
+
+@pytest.mark.parametrize("frame", ["road", "path"])
+@pytest.mark.parametrize("which", ["grid", "grid6"])
+def test_pads_many_are_pads_at_of_each_waypoint(net, which, frame):
+    """``PadTable.pads_many(ks, j0)`` (a path-frame table: one ``np.maximum.reduceat`` over the
+    samples' reach, no suffix table) gives the very floats of ``pads_at(k, j0)`` for every waypoint
+    ``k`` and window starts before, inside, between and past the samples (no tolerance), in any order
+    of ``ks`` with repeats and out-of-range waypoints (clipped, as ``pads_at``); and asks no suffix
+    table of a path-frame one."""
+    g, cases = _routes_for_exactness(net, which)
+    nonzero = 0
+    for i, (r, size, box) in enumerate(cases):
+        b = RouteBody(r, g, *size)
+        W, arc = np.asarray(r.waypoints), np.asarray(r.arc_length)
+        table = b.pad_table(arc, W, _headings(W), *box, frame=frame)
+        rng = np.random.default_rng(i)
+        n = len(table.sig)
+        starts = sorted({0, 1, n - 2, n - 1, n, n + 5, *rng.integers(0, n, 12).tolist(),
+                         *(table.window_start(x) for x in arc[::7] - 3.0)})
+        ks = np.concatenate([np.arange(len(W)), rng.integers(-3, len(W) + 3, 40)])
+        for j0 in starts:
+            if frame == "path":
+                table._suffix.clear()
+            got = table.pads_many(ks, j0)
+            if frame == "path":
+                assert not table._suffix
+            want = np.array([table.pads_at(k, j0) for k in ks.tolist()])
+            np.testing.assert_array_equal(got, want, err_msg=f"case {i}, j0={j0}")
+            nonzero += int((want > 0).any(axis=1).sum())
+        assert table.pads_many([], 0).shape == (0, 4)
+    assert nonzero > 0  # the pads are not all zero: the maxima were compared
+
+
+def test_pads_many_settles_rounding_at_the_box_ends(net):
+    """Where ``sig[j] - arc_k[k]`` rounds onto the box's along bound while ``arc_k[k] + bound`` rounds
+    to the other side of ``sig[j]`` (waypoint arcs nudged by a few ulps around ``sig[j] - bound``),
+    ``pads_many`` still takes exactly the samples ``pads_at`` takes: equal floats."""
+    r = _route(net, LEFT)
+    b = RouteBody(r, net, *SIZES[0])
+    W, arc = np.asarray(r.waypoints), np.asarray(r.arc_length)
+    table = b.pad_table(arc, W, _headings(W), *BOX, frame="path")
+    rng = np.random.default_rng(3)
+    reach = np.linalg.norm(table._path_reach, axis=1)
+    hot = np.flatnonzero(reach > np.median(reach))  # samples whose reach stands out: the end matters
+    differ = 0
+    for _ in range(400):
+        j = int(rng.choice(hot))
+        bound = table.box_lo[0] if rng.random() < 0.5 else table.box_hi[0]
+        a = table.sig[j] - bound
+        for _ in range(int(rng.integers(-4, 5))):
+            a = np.nextafter(a, np.inf if a > 0 else -np.inf)
+        k = int(rng.integers(len(W)))
+        arc_k = table.arc_k.copy()
+        arc_k[k] = a
+        table.arc_k = arc_k
+        table._suffix.clear()
+        j0 = int(rng.integers(0, j + 1))
+        np.testing.assert_array_equal(table.pads_many([k], j0), table.pads_at(k, j0)[None])
+        differ += bool((table.sig[j] - a >= bound) != (table.sig[j] >= a + bound))
+    assert differ > 0  # the two roundings disagreed on some: the settling was exercised
