@@ -461,9 +461,10 @@ class PadTable:
             # not needed (a tenth of the memory: 24 floats a sample down to 4)
             seg = np.searchsorted(self.arc_k, self.sig, side="right")
             h = self.H[np.clip(seg, 1, len(self.H) - 1)]
-            # stored (4, n) (``_path_reach`` is its (n, 4) view): pads_many reduces along the samples
-            self._reach_T = np.empty((4, n))
-            self._path_reach = self._reach_T.T
+            # stored (4, n + 1) (``_path_reach`` is the (n, 4) view of its first n columns): pads_many
+            # reduces along the samples, and its ranges may end at n (the last column, zeros)
+            self._reach_T = np.zeros((4, n + 1))
+            self._path_reach = self._reach_T[:, :n].T
             for a in range(0, n, _REACH_CHUNK):
                 b = min(a + _REACH_CHUNK, n)
                 self._path_reach[a:b] = _sample_reach(self.rel[a:b], h[a:b], self.step[a:b]).T
@@ -546,23 +547,19 @@ class PadTable:
         lo = np.searchsorted(sig, arc + self.box_lo[0], side="left")
         hi = np.searchsorted(sig, arc + self.box_hi[0], side="right")
         n = len(sig)
-        for _ in range(2):
-            lo = np.where((lo > 0) & (sig[np.maximum(lo - 1, 0)] - arc >= self.box_lo[0]), lo - 1, lo)
-            lo = np.where((lo < n) & (sig[np.minimum(lo, n - 1)] - arc < self.box_lo[0]), lo + 1, lo)
-            hi = np.where((hi < n) & (sig[np.minimum(hi, n - 1)] - arc <= self.box_hi[0]), hi + 1, hi)
-            hi = np.where((hi > 0) & (sig[np.maximum(hi - 1, 0)] - arc > self.box_hi[0]), hi - 1, hi)
+        # (the two roundings differ by an ulp or so, the samples lie 0.1 m apart: one index at most)
+        lo -= (lo > 0) & (sig[np.maximum(lo - 1, 0)] - arc >= self.box_lo[0])
+        lo += (lo < n) & (sig[np.minimum(lo, n - 1)] - arc < self.box_lo[0])
+        hi += (hi < n) & (sig[np.minimum(hi, n - 1)] - arc <= self.box_hi[0])
+        hi -= (hi > 0) & (sig[np.maximum(hi - 1, 0)] - arc > self.box_hi[0])
         a = np.maximum(lo, j0)
-        b = hi
-        ok = a < b
+        ok = a < hi
         if not ok.any():
             return out
-        a, b = a[ok], b[ok]
+        a, b = a[ok], hi[ok]
         idx = np.empty(2 * len(a), dtype=np.intp)
         idx[0::2], idx[1::2] = a, b
-        reach = self._reach_T
-        if idx.max() >= reach.shape[1]:  # reduceat's indices must lie inside the array: a range ends it
-            reach = np.hstack([reach, np.zeros((4, 1))])
-        m = np.maximum.reduceat(reach, idx, axis=1)[:, 0::2]
+        m = np.maximum.reduceat(self._reach_T, idx, axis=1)[:, 0::2]
         half = 0.5 * np.array([self.length, self.length, self.width, self.width])
         out[ok] = np.maximum(m.T - half, 0.0)
         return out
