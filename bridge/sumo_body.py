@@ -394,6 +394,7 @@ class PadTable:
             raise ValueError(f"PadTable: frame must be 'road' or 'path', got {frame!r}")
         self.frame = frame
         self.length, self.width = body.length, body.width
+        self._half = 0.5 * np.array([self.length, self.length, self.width, self.width])  # (back, front, right, left)
         self.arc_k = np.asarray(arc_k, dtype=float)
         self.W = np.asarray(W, dtype=float)
         self.H = np.asarray(H, dtype=float)
@@ -516,8 +517,12 @@ class PadTable:
         """:meth:`pads_at` and the last window start ``j1 >= j0`` with the same padding: the
         padding is a suffix maximum, constant over long runs of window starts, so a caller may keep
         the row while its window starts in ``[j0, j1]`` (:meth:`bridge.sumo_world.SumoWorld.claim_pads`).
-        ``j1`` is ``sys.maxsize`` past the samples that count (the zero row from there on)."""
+        ``j1`` is ``sys.maxsize`` where the padding is zero from there on.  A road-frame table keeps a
+        table of suffix maxima per waypoint; a path-frame one takes the maximum over the samples
+        directly (:meth:`_path_run`)."""
         k = int(min(max(k, 0), len(self.W) - 1))
+        if self.frame == "path":
+            return self._path_run(k, j0)
         tab = self._suffix.get(k)
         if tab is None or j0 < tab[0]:  # a window start before the table's (rolled back): built anew from it
             tab = self._suffix[k] = self._table(k, j0)
@@ -527,6 +532,38 @@ class PadTable:
         base, S, last = tab
         i = min(j0 - base, len(S) - 1)
         return S[i], (sys.maxsize if i == len(S) - 1 else base + int(last[i]))
+
+    def _path_run(self, k: int, j0: int) -> tuple[np.ndarray, int]:
+        """:meth:`pads_run` of a path-frame table: the maxima of ``reach - half`` over the samples of
+        waypoint ``k``'s box from ``j0`` on (the very values :meth:`_table` takes, so the same
+        floats), and the run's end: the last sample, over the sides whose padding is positive, that
+        still reaches that side's maximum (past it, that side's padding drops)."""
+        lo, hi = self._sample_range(np.array([k]))
+        a, b = max(int(lo[0]), j0), int(hi[0])
+        if a >= b:
+            return np.zeros(4), sys.maxsize
+        v = self._reach_T[:, a:b] - self._half[:, None]
+        r = v.max(axis=1)
+        pos = r > 0.0
+        if not pos.any():
+            return np.zeros(4), sys.maxsize
+        last = (b - a - 1) - np.argmax(v[pos][:, ::-1] == r[pos, None], axis=1)
+        return np.maximum(r, 0.0), a + int(last.min())
+
+    def _sample_range(self, ks: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Path frame: the samples ``[lo, hi)`` of waypoints ``ks``' boxes, ``box_lo <= sig[j] -
+        arc_k[k] <= box_hi`` (a run: the rounded difference does not decrease along ``sig``;
+        :meth:`_table`'s own bound, ``box_hi + 2 L``, lies past it): searchsorted on ``arc + bound``,
+        then the rounding's +-1 settled on the very comparison :meth:`_reach` makes (the two
+        roundings differ by an ulp or so, the samples lie 0.1 m apart: one index at most)."""
+        sig, arc, n = self.sig, self.arc_k[ks], len(self.sig)
+        lo = np.searchsorted(sig, arc + self.box_lo[0], side="left")
+        hi = np.searchsorted(sig, arc + self.box_hi[0], side="right")
+        lo -= (lo > 0) & (sig[np.maximum(lo - 1, 0)] - arc >= self.box_lo[0])
+        lo += (lo < n) & (sig[np.minimum(lo, n - 1)] - arc < self.box_lo[0])
+        hi += (hi < n) & (sig[np.minimum(hi, n - 1)] - arc <= self.box_hi[0])
+        hi -= (hi > 0) & (sig[np.maximum(hi - 1, 0)] - arc > self.box_hi[0])
+        return lo, hi
 
     def pads_many(self, ks, j0: int) -> np.ndarray:
         """:meth:`pads_at` ``(k, j0)`` for every ``k`` of ``ks`` (m,), one window start, as ``(m, 4)``:
@@ -539,19 +576,7 @@ class PadTable:
         out = np.zeros((len(ks), 4))
         if not len(ks):
             return out
-        sig, arc = self.sig, self.arc_k[ks]
-        # the samples of _table(k, j0): j >= j0 with box_lo <= sig[j] - arc_k[k] <= box_hi (a run: the
-        # rounded difference does not decrease along sig; _table's own bound, box_hi + 2 L, lies past
-        # it); searchsorted on arc + bound, then the rounding's +-1 settled on the very comparison
-        # _reach makes
-        lo = np.searchsorted(sig, arc + self.box_lo[0], side="left")
-        hi = np.searchsorted(sig, arc + self.box_hi[0], side="right")
-        n = len(sig)
-        # (the two roundings differ by an ulp or so, the samples lie 0.1 m apart: one index at most)
-        lo -= (lo > 0) & (sig[np.maximum(lo - 1, 0)] - arc >= self.box_lo[0])
-        lo += (lo < n) & (sig[np.minimum(lo, n - 1)] - arc < self.box_lo[0])
-        hi += (hi < n) & (sig[np.minimum(hi, n - 1)] - arc <= self.box_hi[0])
-        hi -= (hi > 0) & (sig[np.maximum(hi - 1, 0)] - arc > self.box_hi[0])
+        lo, hi = self._sample_range(ks)
         a = np.maximum(lo, j0)
         ok = a < hi
         if not ok.any():
@@ -560,8 +585,7 @@ class PadTable:
         idx = np.empty(2 * len(a), dtype=np.intp)
         idx[0::2], idx[1::2] = a, b
         m = np.maximum.reduceat(self._reach_T, idx, axis=1)[:, 0::2]
-        half = 0.5 * np.array([self.length, self.length, self.width, self.width])
-        out[ok] = np.maximum(m.T - half, 0.0)
+        out[ok] = np.maximum(m.T - self._half, 0.0)
         return out
 
     def window_start(self, sigma_lo: float) -> int:

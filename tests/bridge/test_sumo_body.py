@@ -770,3 +770,38 @@ def test_pads_many_settles_rounding_at_the_box_ends(net):
         np.testing.assert_array_equal(got, want)
         differ[side] += bool((table.sig[j] - a >= bound) != (table.sig[j] >= a + bound))
     assert differ["lo"] > 0 and differ["hi"] > 0, differ  # both ends' settling was exercised
+
+
+@pytest.mark.parametrize("frame", ["road", "path"])
+def test_pad_runs_hold_their_row_and_end_where_it_changes(net, frame):
+    """``PadTable.pads_run(k, j0) -> (row, j1)``: the row is ``pads_at(k, j)`` for every window start
+    ``j`` in ``[j0, j1]`` and differs at ``j1 + 1`` (a caller keeping the row over the run serves the
+    very floats, and a run with padding is not cut short); ``j1`` is ``sys.maxsize`` only where the
+    padding is zero from ``j0`` on.  Turns and a lane change, car and bus, waypoints at random, window starts from
+    before the box to past it."""
+    import sys as _sys
+    rng = np.random.default_rng(11)
+    runs = ends = 0
+    for edges in (LEFT, RIGHT, "lane change"):
+        for size in SIZES[:2]:
+            r = _lane_change(net, size)[0] if edges == "lane change" else _route(net, edges)
+            b = RouteBody(r, net, *size)
+            W, arc = np.asarray(r.waypoints), np.asarray(r.arc_length)
+            table = b.pad_table(arc, W, _headings(W), *BOX, frame=frame)
+            n = len(table.sig)
+            for k in rng.integers(0, len(W), 12).tolist():
+                j0 = table.window_start(arc[k] - float(rng.uniform(0.0, 45.0)))
+                while j0 <= n:
+                    row, j1 = table.pads_run(k, j0)
+                    top = min(j1, n + 2)
+                    for j in range(j0, top + 1):
+                        np.testing.assert_array_equal(table.pads_run(k, j)[0], row, err_msg=f"k={k} j0={j0} j={j}")
+                    runs += 1
+                    if j1 == _sys.maxsize:
+                        assert not row.any(), (k, j0)
+                        break
+                    if row.any():  # (a road table's zero rows may end a run at its last row: still zero)
+                        assert not np.array_equal(table.pads_run(k, j1 + 1)[0], row), (k, j0, j1)
+                        ends += 1
+                    j0 = j1 + 1
+    assert runs > 50 and ends > 20, (runs, ends)
