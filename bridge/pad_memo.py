@@ -58,19 +58,18 @@ class PadMemo:
         if diff is None:
             pads, runs = self._ask(ids, k)
             self.asked += n
-        elif not len(diff) and last[0] == ver:
+        elif not len(diff):  # every row still holds: the same (read-only) arrays
             self.served += n
-            return last[3]
+            if last[0] == ver:
+                return last[3]
+            pads, runs = last[3], last[4]
         else:
+            got, got_runs = self._ask([ids[i] for i in diff.tolist()], k[diff])
             pads = last[3].copy()
-            runs = None if last[4] is None else (last[4][0].copy(), last[4][1].copy())
-            if len(diff):
-                got, got_runs = self._ask([ids[i] for i in diff.tolist()], k[diff])
-                pads[diff] = got
-                if runs is not None and got_runs is not None:
-                    runs[0][diff], runs[1][diff] = got_runs
-                else:
-                    runs = None
+            pads[diff] = got
+            if last[4] is not None and got_runs is not None:
+                runs = (last[4][0].copy(), last[4][1].copy())
+                runs[0][diff], runs[1][diff] = got_runs
             self.asked += len(diff)
             self.served += n - len(diff)
         if ver is not None:

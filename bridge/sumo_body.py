@@ -626,8 +626,7 @@ class PadTable:
         out = np.full((j1 - j0, 4), -np.inf)
         inside, reach = self._reach(k, j0, j1)
         if inside.any():
-            half = 0.5 * np.array([self.length, self.length, self.width, self.width])
-            out[inside] = reach.T - half
+            out[inside] = reach.T - self._half
         return out
 
     def _reach(self, k: int, j0: int, j1: int) -> tuple[np.ndarray, np.ndarray]:
@@ -664,5 +663,4 @@ class PadTable:
         inside, reach = self._reach(k, j0, j1)
         if not inside.any():
             return np.zeros(4)
-        half = 0.5 * np.array([self.length, self.length, self.width, self.width])
-        return np.maximum(reach.max(axis=1) - half, 0.0)
+        return np.maximum(reach.max(axis=1) - self._half, 0.0)
