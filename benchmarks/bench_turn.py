@@ -42,7 +42,7 @@ from controllers.classes import builtin_classes
 from controllers.path import PathFrame
 from controllers.plant import step as plant_step
 from controllers.settings import ControllerSettings, SynthesisSettings
-from controllers.speed_limits import SpeedSettings, curvature, restart_slack, route_speeds
+from controllers.speed_limits import SpeedSettings, curvature, route_speeds
 from controllers.stmpc import STMPC
 from controllers.synthesis import synthesize
 
@@ -88,23 +88,12 @@ def drive(vc, ctl, W, frame: PathFrame, kind: str, seed: int, speed: SpeedSettin
     x0 = m.equilibrium(Wp[0])
     g.add("v0", Wp, H, x0, int(ctl.index(x0[None], Wp[:1], H[:1])[0]), rs)
     rng = np.random.default_rng(seed)
-    N = ctl.N
     out = {k: [] for k in ("X", "k", "l")}
     viol = 0
     s_prev = 0.0
     for _ in range(max_steps):
-        # 1. requests (Cosim._fleet)
-        cen, hd, _ = g.centres()
-        nxt, nh, has = g.centres(1)
-        lp = ctl.index(g.X, nxt, nh)
-        g.cap, _ = g.speed_caps(Ts)
-        inside = lp <= N
-        want = lp + restart_slack(g.slack(Ts, 1, g.cap), g.l, g.denied_last)
-        may = has & ctl.may_request(g.X, cen, hd, lp, g.cap)
-        may &= (want <= N) | (g.l == 0)
-        lp = np.where(inside, np.minimum(want, N), lp)
-        may &= ctl.cap_admits(g.X, nxt, nh, lp, g.cap) | (g.l == 0)
-        g.req_l = lp
+        # 1. requests (as the co-simulation asks: _Group.request)
+        may, _, _ = g.request(Ts, "early", True)
         # 2.-3a. every request granted
         g.k[may] += 1
         g.l[may] = g.req_l[may]
@@ -146,9 +135,9 @@ def drive(vc, ctl, W, frame: PathFrame, kind: str, seed: int, speed: SpeedSettin
 
 
 def cosim_road(classes, W, seed: int, steps: int) -> np.ndarray:
-    """The same car in ``Cosim`` (authority, free plane, one vehicle): its states, ``steps`` steps."""
+    """The same car in ``Cosim`` (authority, road frame, free plane, one vehicle): its states, ``steps`` steps."""
     sim = Cosim(classes, [VehicleSpec("v0", "car", W)],
-                CosimSettings(controller="authority", disturbance="random", seed=seed))
+                CosimSettings(controller="authority", disturbance="random", seed=seed, frame="road"))
     sim._admit(0.0)
     g = sim.groups["car"]
     X = []

@@ -35,26 +35,24 @@ import numpy as np
 from controllers.classes import VehicleClass
 from controllers.plant import DISTURBANCES, step as plant_step
 from controllers.settings import AUTHORITY_MAX_LEVELS, ControllerSettings, SynthesisSettings
-from controllers.speed_limits import SpeedSettings, free_flow_time, restart_slack, route_speeds
+from controllers.speed_limits import SpeedSettings, free_flow_time, route_speeds
 from controllers.stmpc import STMPC
-from bridge.groups import _Group, _headings
-from bridge.pad_memo import PadMemo
-from bridge.path_fleet import FRAMES, PathFleet
 from controllers.synthesis import synthesize
-from controllers.tolerances import GEOMETRY_TOL
-from tm.claims import Claims
-from tm.reach import ReachClaims, candidate_pairs, world_aabb
-from tm.reach_book import ReachBook, admit_reach, footprint_claims
+from bridge.fleet_claims import FleetClaims
+from bridge.groups import _Group, _headings
+from bridge.path_fleet import FRAMES, PathFleet
+from bridge.request_filters import RequestFilters
+from tm.reach import ReachClaims
+from tm.reach_book import ReachBook, admit_reach
 from tm.authority_gate import AuthorityGate
 from tm.authority_reach import AuthorityReach
-from tm.reach_cache import ClaimCache
-from tm.junctions import ClassReach, JunctionFleet, JunctionGate, Zone
+from tm.junctions import ClassReach, JunctionGate, Zone
 from tm.manager import FleetState, TrafficManager
-from tm.pedestrians import STRIPING_SPEED_FACTOR, PedestrianRule, footprint_contacts
+from tm.pedestrians import PedestrianRule, footprint_contacts
 from tm.crossing_gate import CrossingGate
 from tm.monitor import Monitor
 from tm.settings import TMSettings
-from tm.signals import LineTiming, SignalBook, SignalSettings, StopLines, withhold as signal_withhold
+from tm.signals import SignalBook, SignalSettings, StopLines
 
 #: Valid values of :attr:`CosimSettings.controller`.
 CONTROLLERS = ("paper", "authority")
@@ -185,6 +183,11 @@ class VehicleRecord:
 class Cosim:
     """One co-simulation run.
 
+    Composed of the per-class groups (:class:`bridge.groups._Group`: states, waypoints, controllers),
+    the traffic manager, the liveness layer (``junctions``), the fleet's claims
+    (:class:`bridge.fleet_claims.FleetClaims`), the request filters (signals, junction tokens,
+    pedestrians: :class:`bridge.request_filters.RequestFilters`), the monitor and the world.
+
     Parameters
     ----------
     classes : mapping of str to VehicleClass
@@ -194,6 +197,17 @@ class Cosim:
     world : World, optional
         Defaults to :class:`FreePlaneWorld`.
     synthesis : SynthesisSettings, optional
+    zones : list of Zone, optional
+        Junction zones (the liveness layer, :mod:`tm.junctions`).
+    observers : list, optional
+        Objects with ``on_step(sim, state, decision, row)``, called at the end of every step
+        (``state``: the FleetState the TM decided on, or None with no vehicle; ``decision``: the TM's
+        Decision or None; ``row``: the step's KPI row). Loggers (MCAP) and KPI accumulators attach here.
+    pedestrians : PedestrianRule, optional
+        The pedestrian rule (None: no pedestrians); positions come from ``world.pedestrians()``.
+    crossings : list, optional
+        Authority mode with pedestrians: the crossing regions stop points never rest on
+        (:mod:`tm.crossing_gate`).
     """
 
     def __init__(self, classes, specs, settings: CosimSettings, world=None,
@@ -201,44 +215,12 @@ class Cosim:
                  observers: list | None = None, pedestrians: PedestrianRule | None = None,
                  crossings: list | None = None):
         self.settings = settings
-        #: The pedestrian rule (None: no pedestrians); positions come from ``world.pedestrians()``.
         self.pedestrians = pedestrians
         self.pedestrian_conflicts: set = set()  # unique (vehicle, person) footprint-body contacts
-        self.pedestrian_withheld = 0            # requests and admissions withheld for pedestrians
-        #: this step's claims of its requests, computed once (:meth:`_request_claims`, :meth:`_requested_reach`)
-        self._req_cache: tuple | None = None
-        #: Objects with ``on_step(sim, state, decision, row)``, called at the end of every
-        #: step (``state``: the FleetState the TM decided on, or None with no vehicle;
-        #: ``decision``: the TM's Decision or None; ``row``: the step's KPI row).
-        #: Loggers (MCAP) and KPI accumulators attach here.
         self.observers = list(observers or [])
         self.world = world or FreePlaneWorld()
-        used = sorted({s.vclass for s in specs})
-        missing = [c for c in used if c not in classes]
-        if missing:
-            raise ValueError(f"vehicle class(es) {missing} unknown; valid: {sorted(classes)}")
-        self.classes = {c: classes[c] for c in used}
-        for s in specs:
-            W = np.asarray(s.waypoints, dtype=float)
-            if W.ndim != 2 or W.shape[1] != 2 or len(W) < 2:
-                raise ValueError(f"vehicle {s.id}: waypoints must be (K >= 2, 2), got {W.shape}")
-            gaps = np.linalg.norm(np.diff(W, axis=0), axis=1)
-            model = self.classes[s.vclass].model
-            delta = model.delta
-            if np.any(gaps > delta + 1e-9):
-                i = int(np.argmax(gaps))
-                raise ValueError(f"vehicle {s.id}: waypoints {i} and {i + 1} are {gaps[i]:.3f} m apart; "
-                                 f"class {s.vclass!r} needs at most delta = {delta} m")
-            if model.frame == "road" and len(W) > 2 and not settings.path_frame:
-                h = _headings(W)[1:]
-                turn = np.degrees(np.abs((np.diff(h) + np.pi) % (2 * np.pi) - np.pi))
-                if np.any(turn > model.turn_max_deg + 1e-6):
-                    i = int(np.argmax(turn))
-                    raise ValueError(
-                        f"vehicle {s.id}: its route turns by {turn[i]:.1f} deg at waypoint {i + 1}; class "
-                        f"{s.vclass!r} (road frame) accepts at most {model.turn_max_deg} deg between segments")
-        if len({s.id for s in specs}) != len(specs):
-            raise ValueError("vehicle ids must be unique")
+        self.classes = _used_classes(classes, specs)
+        validate_specs(specs, self.classes, settings.path_frame)
         self.authority = settings.controller == "authority"
         #: path-frame plants (settings.frame): the routes' frames and the fleet's stack
         self.paths = PathFleet() if settings.path_frame else None
@@ -262,10 +244,6 @@ class Cosim:
         #: claim models (authority mode): reach-tightened, time-indexed claims (tm.reach_book)
         self.reach = ReachBook(self.families, {c: (vc.length, vc.width) for c, vc in self.classes.items()}) \
             if self.authority else None
-        #: current claims reused between steps where sound (tm.reach_cache; authority mode with
-        #: ``settings.claim_cache``; None: fresh claims every step); with the world's body padding
-        #: (SUMO's, ``world.claim_pads``): a shifted claim only where its pad still covers the one needed now
-        self.claim_cache = ClaimCache(self.reach) if (self.authority and settings.claim_cache) else None
         sp = settings.speed
         self.groups = {c: _Group(vc, STMPC(self.families[c], cs), decel=_look_ahead_decel(vc),
                                  slack_steps=sp.slack_steps) for c, vc in self.classes.items()}
@@ -279,9 +257,6 @@ class Cosim:
         self.records = {s.id: VehicleRecord(s.id, s.vclass, s.depart_s, s.route_length_m) for s in specs}
         self._speeds = {}
         for s_ in specs:  # validated speed tables and free-flow times, before anything runs
-            if s_.speed_limits is not None and len(np.asarray(s_.speed_limits)) != len(s_.waypoints):
-                raise ValueError(f"vehicle {s_.id}: speed_limits has {len(np.asarray(s_.speed_limits))} "
-                                 f"entries, one per waypoint ({len(s_.waypoints)}) is needed")
             self._route_speeds(s_)
         self.rng = np.random.default_rng(settings.seed)
         self.t = 0
@@ -302,24 +277,22 @@ class Cosim:
             self.junctions = JunctionGate(self.zones, {
                 c: ClassReach.of(f.position_sets, self.classes[c].length, self.classes[c].width,
                                  self.classes[c].model.frame == "road") for c, f in self.families.items()})
+        #: the fleet's claims: reach claims with the world's body padding, reused between steps where
+        #: sound (``settings.claim_cache``), the requests' claims once per step
+        self.claims = FleetClaims(self.groups, self.classes, self.world, self.tm, self.reach, self.paths,
+                                  settings.claim_cache, lambda sp: self._route_speeds(sp).arc)
+        #: current claims reused between steps (tm.reach_cache; None: fresh claims every step)
+        self.claim_cache = self.claims.cache
         self._claims_now: ReachClaims | None = None  # authority: this step's claims before the decision
-        self._in_force: tuple | None = None  # authority: (step, ids, claims in force after its decision)
-        self._junction_fleet: JunctionFleet | None = None  # this step's fleet as the junction gate saw it
-        #: authority mode with pedestrians: stop points never rest on a crossing they cannot clear
-        #: (``crossings``: the crossing regions; tm.crossing_gate)
-        self.crossing_gate = None
+        crossing_gate = None
         if self.authority and pedestrians is not None and crossings:
-            self.crossing_gate = CrossingGate(crossings, self.junctions.classes,
-                                              {c: f.N + pedestrians.hold_steps for c, f in self.families.items()},
-                                              pedestrians)
-        self._ms_request = self._ms_gate = 0.0  # this step's request indices and junction tokens
-        # traffic lights (tm.signals): the vehicles' stop lines; link states read once per step
-        self.signal_book = SignalBook(settings.signals)
-        self._link_state: np.ndarray | None = None
-        # SUMO's own bodies (bridge.sumo_body): per waypoint the claims' footprint padding
-        self._pads: dict[str, np.ndarray | None] = {}
-        #: the groups' claim padding (world.claim_pads), looked up once per step (bridge.pad_memo)
-        self._pad_memo = PadMemo(self.world)
+            crossing_gate = CrossingGate(crossings, self.junctions.classes,
+                                         {c: f.N + pedestrians.hold_steps for c, f in self.families.items()},
+                                         pedestrians)
+        #: requests withheld before the decision: signals, junction tokens, pedestrians, crossings
+        self.filters = RequestFilters(settings.signals, self.world, self.groups, self.junctions, self.claims,
+                                      self._poses, pedestrians, crossing_gate)
+        self._ms_request = 0.0  # this step's request indices
         self._window_exits = 0  # vehicle-steps past the padding's stretch (see body_window_exits)
 
     def _route_speeds(self, spec: VehicleSpec):
@@ -338,175 +311,22 @@ class Cosim:
                 rec.free_flow_s = free_flow_time(rs.arc, rs.lane, 0.5 * vc.length)
         return rs
 
-    # -------------------------------------------------------------- state
-    def _fleet(self, with_requests: bool):
-        ids, fam, C, L, H, Ln, Wd = [], [], [], [], [], [], []
-        RQ, RC, RL, RH = [], [], [], []
-        for c, g in self.groups.items():
-            if not g.ids:
-                continue
-            cen, hd, _ = g.centres()
-            wcen, whd, _ = g.world_centres()
-            ids += g.ids
-            fam += [c] * len(g.ids)
-            C.append(wcen)
-            L.append(g.l)
-            H.append(whd)
-            Ln.append(np.full(len(g.ids), g.vclass.length))
-            Wd.append(np.full(len(g.ids), g.vclass.width))
-            if with_requests:
-                tr = time.perf_counter()
-                nxt, nh, has = g.centres(1)
-                lp = g.ctl.index(g.X, nxt, nh)
-                self._ms_request += (time.perf_counter() - tr) * 1e3
-                Ts = self.settings.Ts
-                g.cap, _ = g.speed_caps(Ts)
-                # a binding speed bound asks for a grant with slack (SpeedSettings.slack_steps) and
-                # only for one whose tube lets the vehicle keep the bound (a stopped vehicle always asks)
-                inside = lp <= g.ctl.N
-                # at rest and denied: ask without slack (its claim would reach behind it: liveness)
-                want = lp + restart_slack(g.slack(Ts, 1, g.cap), g.l, g.denied_last)
-                may = has & g.ctl.may_request(g.X, cen, hd, lp, g.cap if self.authority else None)
-                may &= (want <= g.ctl.N) | (g.l == 0)
-                lp = np.where(inside, np.minimum(want, g.ctl.N), lp)
-                may &= g.ctl.cap_admits(g.X, nxt, nh, lp, g.cap) | (g.l == 0)
-                g.req_l = lp
-                if self.settings.switching == "terminal":
-                    may &= g.l == 0
-                RQ.append(may)
-                wnxt, wnh, _ = g.world_centres(1)
-                RC.append(wnxt)
-                RL.append(np.minimum(lp, g.ctl.N))
-                RH.append(wnh)
-        if not ids:
-            return None
-        cat = np.concatenate
-        kw = {}
-        if with_requests:
-            kw = dict(requesting=cat(RQ), req_centre=np.vstack(RC), req_index=cat(RL), req_heading=cat(RH))
-        return FleetState(ids=ids, family=np.array(fam), centre=np.vstack(C), index=cat(L), heading=cat(H),
-                          length=cat(Ln), width=cat(Wd), **kw)
+    # -------------------------------------------------------------- counters
+    @property
+    def signal_book(self) -> SignalBook:
+        """The vehicles' signalised stop lines (:mod:`tm.signals`)."""
+        return self.filters.signal_book
 
-    def _requests(self):
-        """The fleet state with every vehicle's index and request (None with no vehicle);
-        requests into a junction guard without its token withheld (:meth:`_gate`)."""
-        state = self._fleet(with_requests=True)
-        self._link_state = None
-        self._junction_fleet = None
-        self._claims_now = self._current_claims() if self.authority and state is not None else None
-        if state is not None and len(self.signal_book):
-            state = self._signals(state)
-        elif self.junctions.standing:
-            self.junctions.give_back(())
-        if state is not None and self.zones:
-            tg = time.perf_counter()
-            state = self._gate(state)
-            self._ms_gate += (time.perf_counter() - tg) * 1e3
-        if state is not None and self.pedestrians is not None and state.requesting.any():
-            state = self._walkers(state)
-        return state
-
-    def _signal_lines(self, ids, centre, heading, length):
-        """The fleet's stop lines (:meth:`tm.signals.SignalBook.gather`) from the groups' states."""
-        live = [g for g in self.groups.values() if g.ids]
-        pos, _ = self._poses()
-        k = np.concatenate([g.k for g in live])
-        speed = np.concatenate([np.linalg.norm(g.X[:, 2:4], axis=1) for g in live])
-        return k, speed, self.signal_book.gather(ids, k, centre, heading, pos, 0.5 * length)
-
-    def _signals(self, state: FleetState) -> FleetState:
-        """Withhold the requests that would take a vehicle past a red (or yellow with room to stop)
-        stop line (:func:`tm.signals.withhold`); nothing with ``signals.mode = ignore``."""
-        read = getattr(self.world, "link_states", None)
-        self._link_state = read() if read is not None else None
-        if self._link_state is None or not len(self._link_state):
-            self._link_state = None
-            self.junctions.give_back(())
-            return state
-        k, speed, (row, bound, s_line, slot, front) = self._signal_lines(state.ids, state.centre, state.heading,
-                                                                         state.length)
-        req, held = signal_withhold(self.settings.signals, state.requesting, k, row, bound,
-                                    self._link_state[slot], s_line - front[row], speed,
-                                    self._line_timing(state.ids, slot))
-        self.signal_book.withheld += int(held.sum())
-        # vehicles standing at a red give their junction tokens back (liveness, tm.junctions)
-        self.junctions.give_back([state.ids[i] for i in np.flatnonzero(held).tolist()])
-        return replace(state, requesting=req)
-
-    def _line_timing(self, ids, slot: np.ndarray) -> LineTiming | None:
-        """Authority mode: the time-to-red rule's inputs (:class:`tm.signals.LineTiming`), the time
-        until each link is red read from the world (None in paper mode or without a schedule)."""
-        read = getattr(self.world, "link_time_to_red", None)
-        if not self.authority or read is None:
-            return None
-        got = self.signal_book.timing_of(ids)
-        to_red = read()
-        if got is None or to_red is None:
-            return None
-        live = [g for g in self.groups.values() if g.ids]
-        cap = np.concatenate([g.cap for g in live])
-        decel = np.concatenate([np.full(len(g.ids), g.ctl.authority.decel) for g in live])
-        return LineTiming(commit=got[0], rest_past=got[1], time_to_red=np.asarray(to_red)[slot], v_cap=cap,
-                          decel=decel)
-
-    def _peds(self) -> tuple[list, np.ndarray]:
-        """Persons' ids and positions from the world (none if it has no pedestrians)."""
-        get = getattr(self.world, "pedestrians", None)
-        return get() if get is not None else ([], np.zeros((0, 2)))
-
-    def _ped_speed(self) -> None:
-        """Raise the rule's speed bound to the fastest pedestrian the world has seen (striping factor)."""
-        v = getattr(self.world, "ped_speed_max", 0.0)
-        self.pedestrians.raise_speed(v * STRIPING_SPEED_FACTOR)
-
-    def _walkers(self, state: FleetState) -> FleetState:
-        """Withhold requests whose new claim meets a walking region a pedestrian can reach in time."""
-        peds = self._peds()[1]
-        if not len(peds):
-            return state
-        self._ped_speed()
-        r = np.flatnonzero(state.requesting)
-        if self.authority:  # reach claims, slot k against the pedestrians' k-step reach (tm.pedestrians)
-            stop = self.pedestrians.withhold_reach(self._requested_reach(state), state.req_index[r], peds)
-        else:
-            stop = self.pedestrians.withhold(self._request_claims(state)[2], peds)
-        if stop.any():
-            self.pedestrian_withheld += int(stop.sum())
-            req = state.requesting.copy()
-            req[r[stop]] = False
-            state = replace(state, requesting=req)
-        if self.crossing_gate is not None and state.requesting.any():
-            state = self._crossings(state, peds)
-        return state
-
-    def _crossings(self, state: FleetState, peds: np.ndarray) -> FleetState:
-        """Authority mode: withhold requests that would put a stop point on a crossing the vehicle
-        cannot clear before a pedestrian can reach it, or without room past it (tm.crossing_gate)."""
-        live = [g for g in self.groups.values() if g.ids]
-        routes = [(W, H, k) for g in live for W, H, k in zip(g.W, g.H, g.k.tolist())]
-        b = self._claims_now.slot_boxes[:, :, -1]  # where each vehicle stays if denied from now on
-        fleet = self._junction_fleet
-        limit = None if fleet is None else (lambda i: self.junctions.stop_limit(fleet, i))
-        stop = self.crossing_gate.withhold(state.ids, state.family, routes, state.requesting, peds,
-                                           np.column_stack([b[0], b[2]]), np.column_stack([b[1], b[3]]), limit)
-        if not stop.any():
-            return state
-        return replace(state, requesting=state.requesting & ~stop)
+    @property
+    def pedestrian_withheld(self) -> int:
+        """Requests and admissions withheld for pedestrians, over the run."""
+        return self.filters.pedestrian_withheld
 
     @property
     def crossing_withheld(self) -> int:
         """Requests withheld by the crossing gate (authority mode with pedestrians), over the run."""
-        return 0 if self.crossing_gate is None else self.crossing_gate.withheld
-
-    def _count_red_crossings(self) -> None:
-        """Front bumpers that crossed a stop line on red in this step (``red_violations``)."""
-        if self._link_state is None:
-            return
-        cur = self._fleet(with_requests=False)
-        if cur is None:
-            return
-        _, _, (row, _, s_line, slot, front) = self._signal_lines(cur.ids, cur.centre, cur.heading, cur.length)
-        self.signal_book.count_crossings(cur.ids, front, row, s_line, self._link_state[slot])
+        gate = self.filters.crossing_gate
+        return 0 if gate is None else gate.withheld
 
     @property
     def body_window_exits(self) -> int:
@@ -525,216 +345,149 @@ class Cosim:
         """Per zone: its token holders (id -> route key, corridor boxes lo, hi)."""
         return self.junctions.holders
 
-    @property
-    def zone_lo(self) -> np.ndarray:
-        """Lower corners of the zones' guards (the zones enlarged by the largest claim radius)."""
-        return self.junctions.lo
+    # -------------------------------------------------------------- state
+    def _live(self) -> list[_Group]:
+        return [g for g in self.groups.values() if g.ids]
 
-    @property
-    def zone_hi(self) -> np.ndarray:
-        """Upper corners of the zones' guards."""
-        return self.junctions.hi
-
-    def _gate(self, state: FleetState) -> FleetState:
-        """Withhold requests into a zone guard whose token another vehicle holds (see :class:`Zone`;
-        authority mode: stop points past an entry line, :mod:`tm.authority_gate`)."""
-        r = np.flatnonzero(state.requesting)
-        if self.authority:  # the rules are on the stop points: the new claims' boxes are not used
-            cur_lo, cur_hi = world_aabb(self._claims_now)
-            new_lo = new_hi = np.zeros((len(r), 2))
-        else:
-            cur, r, new = self._request_claims(state)
-            cur_lo, cur_hi = cur.aabb()
-            new_lo = new_hi = np.zeros((0, 2))
-            if len(r):
-                new_lo, new_hi = new.aabb()
-        fn = getattr(self.world, "claim_pads", None) if self.authority else None
-        pads = None
-        if fn is not None:  # the claims' body padding along a route (SUMO: bridge.sumo_body)
-            def pads(rows, idx, ids=state.ids):
-                p = fn([ids[r] for r in rows.tolist()], idx)
-                return np.zeros((len(idx), 4)) if p is None else p
-        fleet = JunctionFleet(state.ids, state.family, cur_lo, cur_hi,
-                              tuple((g.W, g.H, g.k) for g in self.groups.values() if g.ids), pads)
-        req = self.junctions.withhold(self.t, fleet, state.requesting, new_lo, new_hi)
-        self._junction_fleet = fleet
-        if not len(r):
-            return state
-        return replace(state, requesting=req)
-
-    def _spec_pads(self, sp: VehicleSpec) -> np.ndarray:
-        """The claims' footprint padding (4,) of ``sp`` at rest on its first waypoint, preparing the
-        world's padding of its route (``world.register_pads``, SUMO: :mod:`bridge.sumo_body`): how
-        far the world's own body reaches beyond the rectangle, for the positions the class's sets
-        hold in a waypoint's frame (``T^N``'s projection, cut :data:`~bridge.sumo_body.AHEAD_M`
-        past ``T^0``); zeros without one or in paper mode."""
-        pads = self._pads.get(sp.id)
-        if pads is None:
-            fn = getattr(self.world, "register_pads", None)
-            if self.authority and fn is not None:
-                T = self.reach.models[sp.vclass].tables
-                lo = (float(T.p_lo[T.N]), float(T.y_lo[T.N]))
-                hi = (self._ahead(sp.vclass), float(T.y_hi[T.N]))
-                if self.paths is not None:
-                    hb = self.paths.body_headings(sp.id, sp.waypoints, self._route_speeds(sp).arc)
-                    pads = fn(sp, lo, hi, "path", hb)
-                else:
-                    pads = fn(sp, lo, hi)
-            if pads is None:
-                pads = np.zeros(4)
-            self._pads[sp.id] = pads
-        return pads
-
-    def _group_pads(self, g: _Group, offset: int = 0) -> np.ndarray:
-        """The claims' footprint padding (n, 4) of a group's vehicles for waypoints ``k + offset``
-        (``world.claim_pads``; zeros without it or in paper mode)."""
-        if not (self.authority and hasattr(self.world, "claim_pads")):
-            return np.zeros((len(g.ids), 4))
-        return self._pad_memo.pads(id(g), g.ids, np.minimum(g.k + offset, g.K - 1), offset)
-
-    def _ahead(self, vclass: str) -> float:
-        """How far past its waypoint (along its frame) a vehicle's position may be for the padding."""
-        from bridge.sumo_body import AHEAD_M
-
-        return float(self.reach.models[vclass].tables.p_hi[0]) + AHEAD_M
-
-    def _reach_claims(self, requests: FleetState | None = None, rows: np.ndarray | None = None) -> ReachClaims:
-        """Reach claims (authority mode) of every vehicle for its current waypoint, in fleet order;
-        with ``requests``: of its requesters for their requested waypoints; with ``rows`` (bool, fleet
-        order): of those vehicles only, for their current waypoints."""
-        parts, o = [], 0
+    def _fleet(self, with_requests: bool):
+        """The fleet's state in fleet order (None with no vehicle); ``with_requests``: every vehicle's
+        request index ``l'`` w.r.t. its next waypoint and whether it may ask (design.md §2, step 1)."""
+        ids, fam, C, L, H, Ln, Wd = [], [], [], [], [], [], []
+        RQ, RC, RL, RH = [], [], [], []
         for c, g in self.groups.items():
             if not g.ids:
                 continue
-            if requests is None:
-                r = slice(None) if rows is None else np.asarray(rows[o:o + len(g.ids)], dtype=bool)
-                if rows is None or r.any():
-                    cen, hd, _ = g.centres()
-                    parts.append((c, g.X[r], cen[r], hd[r], g.l[r], self._group_pads(g)[r],
-                                  self._place(g, 0, None if rows is None else np.flatnonzero(r))))
-            else:
-                r = np.asarray(requests.requesting[o:o + len(g.ids)], dtype=bool)
-                cen, hd, _ = g.centres(1)
-                parts.append((c, g.X[r], cen[r], hd[r], g.req_l[r], self._group_pads(g, 1)[r],
-                              self._place(g, 1, np.flatnonzero(r))))
-            o += len(g.ids)
-        return self.reach.claims(parts)
+            wcen, whd, _ = g.world_centres()
+            ids += g.ids
+            fam += [c] * len(g.ids)
+            C.append(wcen)
+            L.append(g.l)
+            H.append(whd)
+            Ln.append(np.full(len(g.ids), g.vclass.length))
+            Wd.append(np.full(len(g.ids), g.vclass.width))
+            if with_requests:
+                may, lp, t_index = g.request(self.settings.Ts, self.settings.switching, self.authority)
+                self._ms_request += t_index * 1e3
+                RQ.append(may)
+                wnxt, wnh, _ = g.world_centres(1)
+                RC.append(wnxt)
+                RL.append(np.minimum(lp, g.ctl.N))
+                RH.append(wnh)
+        if not ids:
+            return None
+        cat = np.concatenate
+        kw = {}
+        if with_requests:
+            kw = dict(requesting=cat(RQ), req_centre=np.vstack(RC), req_index=cat(RL), req_heading=cat(RH))
+        return FleetState(ids=ids, family=np.array(fam), centre=np.vstack(C), index=cat(L), heading=cat(H),
+                          length=cat(Ln), width=cat(Wd), **kw)
 
-    def _cached_requests(self, state: FleetState, kind: str, build):
-        """``(r, claims of rows r, extra)`` for this step's requesters ``r``; ``build(state) -> (claims of
-        state's requesters, extra)`` runs for the first state of the step asked about, later states take
-        their rows from it (within a step the fleet is the same and requests are only ever withheld:
-        signals, junction tokens, pedestrians)."""
-        r = np.flatnonzero(state.requesting)
-        c = self._req_cache
-        if c is None or (c[0], c[2]) != (self.t, kind) or c[1] is not state.ids or not np.isin(r, c[3]).all():
-            c = self._req_cache = (self.t, state.ids, kind, r, *build(state))
-        return r, c[4].take(np.searchsorted(c[3], r)), c[5]
+    def _requests(self):
+        """The fleet state with every vehicle's index and request (None with no vehicle); requests
+        withheld by the signals, the junction tokens and the pedestrian rules (:attr:`filters`)."""
+        state = self._fleet(with_requests=True)
+        self._claims_now = self.claims.current(self.t) if self.authority and state is not None else None
+        return self.filters.apply(self.t, state, self._claims_now)
 
-    def _request_claims(self, state: FleetState) -> tuple[Claims, np.ndarray, Claims]:
-        """Paper mode: the fleet's current claims, the requesters ``r`` and the claims of their
-        requests (once per step: the junction gate and the pedestrian rule share them)."""
-        def build(st):
-            cur = self.tm.claims(st)
-            q = np.flatnonzero(st.requesting)
-            return Claims(cur.table, cur.family[q], st.req_centre[q], st.req_index[q], st.req_heading[q],
-                          cur.length[q], cur.width[q]), cur
-        r, new, cur = self._cached_requests(state, "paper", build)
-        return cur, r, new
+    def _poses(self) -> tuple[np.ndarray, np.ndarray]:
+        """World centres (n, 2) and body headings (n,) of the fleet, in fleet order (road frame: the
+        plant's positions and the current waypoints' headings)."""
+        live = self._live()
+        if self.paths is None:
+            return np.vstack([g.X[:, :2] for g in live]), np.concatenate([g.centres()[1] for g in live])
+        groups = list(self.groups.values())
+        poses = [self.paths.pose(groups, g) for g in live]
+        return np.vstack([p[0] for p in poses]), np.concatenate([p[1] for p in poses])
 
-    def _requested_reach(self, state: FleetState) -> ReachClaims:
-        """Authority mode: reach claims of the requesters for their requested waypoints, in fleet order
-        (once per step: the pedestrian rule and the TM's decision share them)."""
-        return self._cached_requests(state, "reach", lambda st: (self._reach_claims(st), None))[1]
+    def world_states(self, g: _Group) -> np.ndarray:
+        """World states ``(x, y, v_x, v_y)`` of group ``g``'s vehicles (the plant's own in the road frame)."""
+        if self.paths is None:
+            return g.X[:, :4]
+        return self.paths.state(list(self.groups.values()), g)
 
-    def _current_claims(self) -> ReachClaims:
-        """Authority mode: every vehicle's reach claims now, in fleet order: from :class:`ClaimCache`
-        (the monitor's claims of this same state, or shifted where sound) or, without a cache, fresh."""
-        cache = self.claim_cache
-        return cache.current(self.t, self._claim_parts()) if cache is not None else self._reach_claims()
-
-    def _claim_parts(self) -> list:
-        """Every vehicle's current claim inputs with ids, in fleet order (for :class:`ClaimCache`)."""
-        parts = []
-        for c, g in self.groups.items():
-            if g.ids:
-                cen, hd, _ = g.centres()
-                parts.append((c, g.ids, g.X, cen, hd, g.l, self._group_pads(g), self._place(g)))
-        return parts
-
-    def _entry_claims(self, ready: list[VehicleSpec], cand: FleetState, with_index: bool = False):
-        """Reach claims of the ready vehicles at rest on their first waypoints (in ``ready``'s order);
-        with ``with_index``: also their membership indices."""
-        parts, rows = [], []
-        for c in self.groups:
-            idx = np.flatnonzero(cand.family == c)
-            if len(idx):
-                ctl = self.groups[c].ctl
-                pads = np.array([self._spec_pads(ready[i]) for i in idx]).reshape(len(idx), -1)
-                if self.paths is None:
-                    cen, hd, place = cand.centre[idx], cand.heading[idx], None
-                else:  # at rest on the start of its path: (0, 0), heading 0
-                    cen, hd = np.zeros((len(idx), 2)), np.zeros(len(idx))
-                    place = self.paths.entry_place([ready[i] for i in idx], cand.centre[idx], cand.heading[idx])
-                X = self.classes[c].model.equilibrium(cen)
-                parts.append((c, X, cen, hd, ctl.index(X, cen, hd), pads, place))
-                rows.append(idx)
-        inv = np.empty(len(ready), dtype=np.intp)
-        inv[np.concatenate(rows)] = np.arange(len(ready))
-        out = self.reach.claims(parts).take(inv)
-        return (out, np.concatenate([p[4] for p in parts])[inv]) if with_index else out
-
-    # -------------------------------------------------------------- one step
+    # -------------------------------------------------------------- one step (design.md §2)
     def step(self) -> dict:
         s = self.settings
-        t_s = self.t * s.Ts
-        row = {"t_s": round(t_s, 6)}
+        row = {"t_s": round(self.t * s.Ts, 6)}
         tt = time.perf_counter()
-        self._ms_request = self._ms_gate = 0.0
-        # 1. membership indices and requests (controllers), withheld by the junction tokens (tm.junctions)
+        self._ms_request = 0.0
+        # 1. membership indices and requests (controllers), some withheld (signals, junction tokens,
+        #    pedestrians: bridge.request_filters)
         state = self._requests()
-        n_req = n_go = 0
-        ms_tm = ms_decide = 0.0
+        dec, n_req, n_go, ms_tm, ms_decide = None, 0, 0, 0.0, 0.0
         if state is not None:
             # 2. TM: Go/Stop for every request
-            td = time.perf_counter()
-            if self.authority:  # current claims: this step's (from the cache, _requests); requested fresh
-                dec = self.tm.decide_reach(state, self._claims_now, self._requested_reach(state))
-                if self.claim_cache is not None:
-                    self.claim_cache.commit(dec.go)
-            else:
-                dec = self.tm.decide(state)
-            ms_decide = (time.perf_counter() - td) * 1e3
-            self.last_decision = dec
-            self._in_force = (self.t, state.ids, dec.claims) if self.authority else None
+            dec, ms_decide = self._decide(state)
             ms_tm = (time.perf_counter() - tt) * 1e3
             n_req, n_go = int(state.requesting.sum()), int(dec.go.sum())
             # 3a. switch on Go (k <- k + 1, l <- l'); denials counted
-            o = 0  # the fleet state concatenates the non-empty groups in order
-            for c, g in self.groups.items():
-                if not g.ids:
-                    continue
-                sl = slice(o, o + len(g.ids))
-                o += len(g.ids)
-                gmask = np.asarray(dec.go[sl], dtype=bool)
-                rmask = np.asarray(state.requesting[sl], dtype=bool)
-                if gmask.any():  # the request index of the new waypoint becomes the index
-                    g.k[gmask] += 1
-                    g.l[gmask] = g.req_l[gmask]
-                denied = rmask & ~gmask
-                for i in np.nonzero(denied)[0]:
-                    rec = self.records[g.ids[i]]
-                    rec.denials += 1
-                    rec.stopped_steps += 1
-                    if not g.denied_last[i]:
-                        rec.stop_episodes += 1
-                g.denied_last = denied
+            self._switch(state, dec)
             row["edges"] = int(len(dec.edges))
         # 3b. controls (terminal law or the QP of eq. (6)); 4. plant, tube invariant checked
         tc = time.perf_counter()
-        for c, g in self.groups.items():
-            if not g.ids:
-                continue
+        self._control()
+        ms_ctl = (time.perf_counter() - tc) * 1e3
+        if self.authority and state is not None:  # 4a. x(t+1) inside S_1(t) (tube escapes counted)
+            self._check_claims(state, dec)
+        self.filters.count_red_crossings(lambda: self._fleet(with_requests=False))  # 4b. red crossings
+        self.t += 1
+        t_next = self.t * s.Ts
+        # 5. arrivals; admissions (condition (12)) against the claims of the vehicles now in the network
+        self._arrive(t_next)
+        admitted = self._admit(t_next)
+        # 6. monitor and world (push, step SUMO, its collisions); then the KPI row and observers
+        tw = time.perf_counter()
+        cur = self._monitor_and_world(row)
+        row.update(active=0 if cur is None else len(cur.ids), requests=n_req, grants=n_go,
+                   denials=n_req - n_go, admitted=admitted, tm_ms=round(ms_tm, 4),
+                   tm_decide_ms=round(ms_decide, 4), request_ms=round(self._ms_request, 4),
+                   gate_ms=round(self.filters.ms_gate, 4),
+                   controller_ms=round(ms_ctl, 4), world_ms=round((time.perf_counter() - tw) * 1e3, 4))
+        self.step_rows.append(row)
+        for obs in self.observers:
+            obs.on_step(self, state, self.last_decision if state is not None else None, row)
+        return row
+
+    def _decide(self, state: FleetState):
+        """Step 2: the TM's decision on ``state`` (authority: this step's current claims and the
+        requesters' fresh ones) and its time (ms)."""
+        td = time.perf_counter()
+        if self.authority:
+            dec = self.tm.decide_reach(state, self._claims_now, self.claims.requested_reach(self.t, state))
+            self.claims.commit(dec.go)
+        else:
+            dec = self.tm.decide(state)
+        ms = (time.perf_counter() - td) * 1e3
+        self.last_decision = dec
+        self.claims.in_force = (self.t, state.ids, dec.claims) if self.authority else None
+        return dec, ms
+
+    def _switch(self, state: FleetState, dec) -> None:
+        """Step 3a: granted vehicles switch (``k <- k + 1``, ``l <- l'``); denials and stop episodes counted."""
+        o = 0  # the fleet state concatenates the non-empty groups in order
+        for g in self._live():
+            sl = slice(o, o + len(g.ids))
+            o += len(g.ids)
+            gmask = np.asarray(dec.go[sl], dtype=bool)
+            rmask = np.asarray(state.requesting[sl], dtype=bool)
+            if gmask.any():  # the request index of the new waypoint becomes the index
+                g.k[gmask] += 1
+                g.l[gmask] = g.req_l[gmask]
+            denied = rmask & ~gmask
+            for i in np.nonzero(denied)[0]:
+                rec = self.records[g.ids[i]]
+                rec.denials += 1
+                rec.stopped_steps += 1
+                if not g.denied_last[i]:
+                    rec.stop_episodes += 1
+            g.denied_last = denied
+
+    def _control(self) -> None:
+        """Steps 3b and 4: every vehicle's input (terminal law or the QP of eq. (6)), the plant step with
+        the disturbance policy, the tube invariant (index strictly down until 0) and the state
+        constraints counted, speed accumulators."""
+        s = self.settings
+        for g in self._live():
             m = g.vclass.model
             cen, hd, _ = g.centres()
             # the bounds of this step (computed with the requests: a switch moves the waypoint, not the
@@ -757,40 +510,37 @@ class Cosim:
             g.l = l_new
             g.speed_sum += speed
             g.steps += 1
-        ms_ctl = (time.perf_counter() - tc) * 1e3
-        if self.authority and state is not None:  # 4a. x(t+1) inside S_1(t) (tube escapes counted)
-            live = [g for g in self.groups.values() if g.ids]
-            pos, body = self._poses()
-            if self.monitor.escapes(dec.claims, pos, state.length, state.width,
-                                    pad=np.vstack([self._group_pads(g) for g in live]),
-                                    body_heading=None if self.paths is None else body):
-                self._in_force = None  # claims from x(t+1) need not lie in the shifted ones (_near_rows)
-            for c, g in self.groups.items():  # positions past the stretch the body padding covers
-                if not g.ids:
-                    continue
-                cen, hd, _ = g.centres()
-                d = g.X[:, :2] - cen
-                along = d[:, 0] * np.cos(hd) + d[:, 1] * np.sin(hd)
-                self._window_exits += int(np.sum(along > self._ahead(c)))
-        self._count_red_crossings()  # 4b. stop lines crossed on red (front bumpers)
-        self.t += 1
-        t_next = self.t * s.Ts
-        # 5. arrivals
-        for c, g in self.groups.items():
+
+    def _check_claims(self, state: FleetState, dec) -> None:
+        """Step 4a (authority): every position ``x(t+1)`` inside its claim ``S_1(t)`` (the monitor counts
+        tube escapes) and within the stretch the body padding covers (``body_window_exits``)."""
+        pos, body = self._poses()
+        if self.monitor.escapes(dec.claims, pos, state.length, state.width, pad=self.claims.fleet_pads(),
+                                body_heading=None if self.paths is None else body):
+            self.claims.in_force = None  # claims from x(t+1) need not lie in the shifted ones (near_rows)
+        for c, g in self.groups.items():  # positions past the stretch the body padding covers
             if not g.ids:
                 continue
+            cen, hd, _ = g.centres()
+            d = g.X[:, :2] - cen
+            along = d[:, 0] * np.cos(hd) + d[:, 1] * np.sin(hd)
+            self._window_exits += int(np.sum(along > self.claims.ahead(c)))
+
+    def _arrive(self, t_s: float) -> None:
+        """Step 5: vehicles at their last waypoint with ``l = 0`` arrive at ``t_s`` and leave the world."""
+        for g in self._live():
             done = g.at_last & (g.l == 0)
             if done.any():
                 self._flush(g, done)
                 for i in np.nonzero(done)[0]:
-                    self.records[g.ids[i]].arrived_s = t_next
+                    self.records[g.ids[i]].arrived_s = t_s
                     self.world.finish(g.ids[i])
                     self.signal_book.remove(g.ids[i])
                 g.remove(done)
-        # 5. admissions (condition (12)) against the claims of the vehicles now in the network
-        admitted = self._admit(t_next)
-        # 6. monitor and world (push, step SUMO, its collisions); then the KPI row and observers
-        tw = time.perf_counter()
+
+    def _monitor_and_world(self, row: dict):
+        """Step 6: the monitor's footprint and claim checks, the world pushed and stepped (its collisions),
+        pedestrian contacts; the fleet now (None with no vehicle)."""
         cur = self._fleet(with_requests=False)
         if cur is not None:
             pos, body = self._poses()
@@ -802,9 +552,8 @@ class Cosim:
             # an outer bound, which denied requests fresh claims grant -- tests/bridge/test_sumo_claim_cache)
             bodies = getattr(self.world, "bodies", None)
             polys = bodies(cur.ids, pos, cur.heading, cur.length, cur.width) if bodies is not None else None
-            fresh = self._reach_claims() if self.authority else self.tm.claims(cur)
-            if self.claim_cache is not None:  # the same state decides next step: its claims, as they are
-                self.claim_cache.offer(self.t, self._claim_parts(), fresh)
+            # the same state decides next step: its claims, as they are, offered to the cache
+            fresh = self.claims.fresh(self.t) if self.authority else self.tm.claims(cur)
             ms = self.monitor.step(cur.ids, pos, cur.heading, cur.length, cur.width, claims=fresh,
                                    polygons=polys)
             self.world.push(list(cur.ids), pos, cur.heading)
@@ -818,39 +567,8 @@ class Cosim:
             self.collisions_world.add(tuple(sorted(pair)))
         if self.pedestrians is not None and cur is not None:  # footprints against bodies, after the step
             self.pedestrian_conflicts |= footprint_contacts(cur.ids, pos, cur.heading, cur.length, cur.width,
-                                                            *self._peds(), self.pedestrians.settings.radius)
-        row.update(active=0 if cur is None else len(cur.ids), requests=n_req, grants=n_go,
-                   denials=n_req - n_go, admitted=admitted, tm_ms=round(ms_tm, 4),
-                   tm_decide_ms=round(ms_decide, 4), request_ms=round(self._ms_request, 4),
-                   gate_ms=round(self._ms_gate, 4),
-                   controller_ms=round(ms_ctl, 4), world_ms=round((time.perf_counter() - tw) * 1e3, 4))
-        self.step_rows.append(row)
-        for obs in self.observers:
-            obs.on_step(self, state, self.last_decision if state is not None else None, row)
-        return row
-
-    def _place(self, g: _Group, offset: int = 0, rows=None):
-        """Path-frame vehicles of group ``g`` (``rows``) placed in the world for waypoints ``k + offset``
-        (:class:`tm.path_claims.PathPlace`); None for road-frame plants."""
-        if self.paths is None:
-            return None
-        return self.paths.place(list(self.groups.values()), g, offset, rows)
-
-    def _poses(self) -> tuple[np.ndarray, np.ndarray]:
-        """World centres (n, 2) and body headings (n,) of the fleet, in fleet order (road frame: the
-        plant's positions and the current waypoints' headings)."""
-        live = [g for g in self.groups.values() if g.ids]
-        if self.paths is None:
-            return np.vstack([g.X[:, :2] for g in live]), np.concatenate([g.centres()[1] for g in live])
-        groups = list(self.groups.values())
-        poses = [self.paths.pose(groups, g) for g in live]
-        return np.vstack([p[0] for p in poses]), np.concatenate([p[1] for p in poses])
-
-    def world_states(self, g: _Group) -> np.ndarray:
-        """World states ``(x, y, v_x, v_y)`` of group ``g``'s vehicles (the plant's own in the road frame)."""
-        if self.paths is None:
-            return g.X[:, :4]
-        return self.paths.state(list(self.groups.values()), g)
+                                                            *self.filters.peds(), self.pedestrians.settings.radius)
+        return cur
 
     def _first_heading(self, sp: VehicleSpec) -> float:
         h = self._heading0.get(sp.id)
@@ -860,104 +578,59 @@ class Cosim:
         return h
 
     def _admit(self, t_s: float) -> int:
+        """Admit the waiting vehicles due by ``t_s`` whose initial tube is free (condition (12)), that miss
+        every token holder's corridor and every walking region a pedestrian can reach; returns how many."""
         n_ready = 0  # pending is sorted by departure: the ready ones are a prefix
         while n_ready < len(self.pending) and self.pending[n_ready].depart_s <= t_s + 1e-9:
             n_ready += 1
         ready = self.pending[:n_ready]
         if not ready:
             return 0
-        cur = self._fleet(with_requests=False)
         cand = FleetState(
             ids=[sp.id for sp in ready], family=np.array([sp.vclass for sp in ready]),
             centre=np.array([sp.waypoints[0] for sp in ready]), index=np.zeros(len(ready), dtype=np.intp),
             heading=np.array([self._first_heading(sp) for sp in ready]),
             length=np.array([self.classes[sp.vclass].length for sp in ready]),
             width=np.array([self.classes[sp.vclass].width for sp in ready]))
-        if cur is None:  # empty network: an empty state
-            cur = FleetState(ids=[], family=np.array([], dtype=str), centre=np.zeros((0, 2)),
-                             index=np.zeros(0, dtype=np.intp), heading=np.zeros(0), length=np.zeros(0),
-                             width=np.zeros(0))
-        else:
-            # A new vehicle appears NOW: it must miss where the others are now (P^l), not only
-            # their claims from the next step on (P^{l-1}).  Claims of index l+1 are P^l.
-            top = np.zeros(len(cur.family), dtype=np.intp)
-            for c, f in self.families.items():
-                top[cur.family == c] = f.N
-            cur = FleetState(ids=cur.ids, family=cur.family, centre=cur.centre,
-                             index=np.minimum(cur.index + 1, top), heading=cur.heading, length=cur.length,
-                             width=cur.width)
+        entry = None
         if self.authority:  # the others' reach claims and their footprints now (condition (12))
-            entry = self._entry_claims(ready, cand, with_index=True)
-            now = self._reach_claims(rows=self._near_rows(cur.ids, cur.centre, entry[0])) if len(cur.ids) else None
-            pos, body = self._poses() if now is not None else (None, None)
-            body = cur.heading if self.paths is None else body
-            pads = np.vstack([self._group_pads(g) for g in self.groups.values() if g.ids]) if now is not None else None
-            now = ReachClaims.concat(now, footprint_claims(pos, body, cur.length, cur.width, pad=pads)) \
-                if now is not None else footprint_claims(np.zeros((0, 2)), [], [], [])
+            entry = self.claims.entry_claims(ready, cand, with_index=True)
+            now = self.claims.occupied(self.t, self._fleet(with_requests=False), entry[0], self._poses)
             ok = admit_reach(now, entry[0], self.settings.tm.check)
         else:
-            ok = self.tm.admit(cur, cand)
+            ok = self.tm.admit(_seen_at_entry(self._fleet(with_requests=False), self.families), cand)
         # nor into a junction token holder's corridor (tm.junctions)
         ok = self.junctions.admissible(ok, cand.family, cand.centre, cand.heading)
-        if self.pedestrians is not None and ok.any():  # nor onto a walking region a pedestrian can reach
-            peds = self._peds()[1]
-            if len(peds):
-                self._ped_speed()
-                stop = ok & (self.pedestrians.withhold_reach(*entry, peds) if self.authority
-                             else self.pedestrians.withhold(self.tm.claims(cand), peds))
-                self.pedestrian_withheld += int(stop.sum())
-                ok = ok & ~stop
+        # nor onto a walking region a pedestrian can reach
+        ok = self.filters.admissible(ok, entry, lambda: self.tm.claims(cand))
         n = 0
         for sp, a in zip(ready, ok):
-            if not a:
-                continue
-            g = self.groups[sp.vclass]
-            W = np.asarray(sp.waypoints, dtype=float)
-            H = _headings(W)
-            rs = self._route_speeds(sp)
-            world = None
-            if self.paths is not None:  # the controller's route: (S_k, 0), heading 0
-                world = (W, H)
-                W, H = self.paths.waypoints(sp.id, W, rs.arc), np.zeros(len(W))
-            x0 = g.vclass.model.equilibrium(W[0])
-            g.add(sp.id, W, H, x0, int(g.ctl.index(x0[None], W[:1], H[:1])[0]), rs, world=world)
-            self.records[sp.id].admitted_s = t_s
-            if sp.stop_lines is not None:
-                reach = self.junctions.classes[sp.vclass].hold + 0.5 * g.vclass.length
-                rest_lead = 0.5 * g.vclass.length - g.ctl.settings.standoff if self.authority else None
-                self.signal_book.add(sp.id, sp.stop_lines, reach, rest_lead)
-            self.world.insert(sp, g.vclass)
-            n += 1
+            if a:
+                self._enter(sp, t_s)
+                n += 1
         if n:
             keep = [i for i, a in enumerate(ok) if not a] + list(range(n_ready, len(self.pending)))
             self.pending = [self.pending[i] for i in keep]
         return n
 
-    def _near_rows(self, ids: list, centre: np.ndarray, entry: ReachClaims) -> np.ndarray | None:
-        """The vehicles (bool, fleet order ``ids``; ``centre`` their current waypoints in the world)
-        whose claims now may meet the entry claims
-        ``entry``: those whose claims in force after this step's decision do (world boxes of all
-        their slots within twice GEOMETRY_TOL).  Their claims from ``x(t+1)`` lie in those
-        (``S_k(t+1) ⊆ S_{k+1}(t)``: the reach nests, the index drops, the padding only shrinks as its
-        window moves on), so the others' cannot meet ``entry`` and admission decides alike without
-        them.  None (every vehicle) when that does not hold: no decision this step, a vehicle not in
-        it, or a tube escape (:meth:`step`, 4a)."""
-        f = self._in_force
-        if f is None or f[0] != self.t - 1:
-            return None
-        pos = {v: i for i, v in enumerate(f[1])}
-        idx = [pos.get(v) for v in ids]
-        if any(i is None for i in idx):
-            return None
-        lo, hi = world_aabb(f[2])
-        idx = np.asarray(idx, dtype=np.intp)
-        elo, ehi = world_aabb(entry)
-        _, j = candidate_pairs(elo, ehi, lo[idx], hi[idx], 2.0 * GEOMETRY_TOL)
-        near = np.zeros(len(ids), dtype=bool)
-        near[j] = True
-        # the inclusion needs the waypoint the claims in force were built for: any other, fresh
-        near |= ~np.all(np.asarray(centre) == f[2].centre[idx], axis=1)
-        return near
+    def _enter(self, sp: VehicleSpec, t_s: float) -> None:
+        """Vehicle ``sp`` enters its group at rest on its first waypoint and the world at ``t_s``."""
+        g = self.groups[sp.vclass]
+        W = np.asarray(sp.waypoints, dtype=float)
+        H = _headings(W)
+        rs = self._route_speeds(sp)
+        world = None
+        if self.paths is not None:  # the controller's route: (S_k, 0), heading 0
+            world = (W, H)
+            W, H = self.paths.waypoints(sp.id, W, rs.arc), np.zeros(len(W))
+        x0 = g.vclass.model.equilibrium(W[0])
+        g.add(sp.id, W, H, x0, int(g.ctl.index(x0[None], W[:1], H[:1])[0]), rs, world=world)
+        self.records[sp.id].admitted_s = t_s
+        if sp.stop_lines is not None:
+            reach = self.junctions.classes[sp.vclass].hold + 0.5 * g.vclass.length
+            rest_lead = 0.5 * g.vclass.length - g.ctl.settings.standoff if self.authority else None
+            self.signal_book.add(sp.id, sp.stop_lines, reach, rest_lead)
+        self.world.insert(sp, g.vclass)
 
     def _flush(self, g: _Group, mask=None) -> None:
         """Move the group's per-vehicle accumulators (rows ``mask``) into the records."""
@@ -973,9 +646,8 @@ class Cosim:
     def flush_records(self) -> None:
         """Bring every :class:`VehicleRecord` up to date (called at the end of :meth:`run`;
         call it before reading ``records`` after stepping by hand)."""
-        for g in self.groups.values():
-            if g.ids:
-                self._flush(g)
+        for g in self._live():
+            self._flush(g)
 
     # -------------------------------------------------------------- run
     @property
@@ -996,6 +668,60 @@ class Cosim:
                     progress(self)
         finally:
             self.flush_records()
+
+
+def _seen_at_entry(cur: FleetState | None, families: dict) -> FleetState:
+    """Paper mode: the vehicles in the network as admission must see them (an empty state if none).
+    A new vehicle appears now: it must miss where the others are now (``P^l``), not only their claims
+    from the next step on (``P^{l-1}``); claims of index ``l + 1`` are ``P^l``."""
+    if cur is None:
+        return FleetState(ids=[], family=np.array([], dtype=str), centre=np.zeros((0, 2)),
+                          index=np.zeros(0, dtype=np.intp), heading=np.zeros(0), length=np.zeros(0),
+                          width=np.zeros(0))
+    top = np.zeros(len(cur.family), dtype=np.intp)
+    for c, f in families.items():
+        top[cur.family == c] = f.N
+    return replace(cur, index=np.minimum(cur.index + 1, top))
+
+
+def _used_classes(classes, specs) -> dict:
+    """The classes the specs name (a clear error naming the unknown ones)."""
+    used = sorted({s.vclass for s in specs})
+    missing = [c for c in used if c not in classes]
+    if missing:
+        raise ValueError(f"vehicle class(es) {missing} unknown; valid: {sorted(classes)}")
+    return {c: classes[c] for c in used}
+
+
+def validate_specs(specs, classes: dict, path_frame: bool) -> None:
+    """Check every spec before anything runs: waypoints (K >= 2, 2) at most the class's delta apart,
+    road-frame routes without turns sharper than the class accepts (``path_frame``: any angle),
+    speed tables of one entry per waypoint, unique ids; a ValueError names the vehicle and the field."""
+    for s in specs:
+        W = np.asarray(s.waypoints, dtype=float)
+        if W.ndim != 2 or W.shape[1] != 2 or len(W) < 2:
+            raise ValueError(f"vehicle {s.id}: waypoints must be (K >= 2, 2), got {W.shape}")
+        gaps = np.linalg.norm(np.diff(W, axis=0), axis=1)
+        model = classes[s.vclass].model
+        delta = model.delta
+        if np.any(gaps > delta + 1e-9):
+            i = int(np.argmax(gaps))
+            raise ValueError(f"vehicle {s.id}: waypoints {i} and {i + 1} are {gaps[i]:.3f} m apart; "
+                             f"class {s.vclass!r} needs at most delta = {delta} m")
+        if model.frame == "road" and len(W) > 2 and not path_frame:
+            h = _headings(W)[1:]
+            turn = np.degrees(np.abs((np.diff(h) + np.pi) % (2 * np.pi) - np.pi))
+            if np.any(turn > model.turn_max_deg + 1e-6):
+                i = int(np.argmax(turn))
+                raise ValueError(
+                    f"vehicle {s.id}: its route turns by {turn[i]:.1f} deg at waypoint {i + 1}; class "
+                    f"{s.vclass!r} (road frame) accepts at most {model.turn_max_deg} deg between segments")
+    if len({s.id for s in specs}) != len(specs):
+        raise ValueError("vehicle ids must be unique")
+    for s in specs:
+        if s.speed_limits is not None and len(np.asarray(s.speed_limits)) != len(s.waypoints):
+            raise ValueError(f"vehicle {s.id}: speed_limits has {len(np.asarray(s.speed_limits))} "
+                             f"entries, one per waypoint ({len(s.waypoints)}) is needed")
 
 
 def _look_ahead_decel(vc: VehicleClass) -> float:

@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 
 from controllers import tolerances as tol
 from controllers.classes import VehicleClass
-from controllers.speed_limits import RouteSpeeds, bound_at, plan_steps
+from controllers.speed_limits import RouteSpeeds, bound_at, plan_steps, restart_slack
 from controllers.stmpc import STMPC
 
 __all__ = ["_Group", "_headings"]
@@ -192,6 +194,32 @@ class _Group:
         bind = (extra > 0) | (np.asarray(cap)[r] < self.v_max - tol.SPEED_BOUND_TOL)
         out[r] = np.where(bind, np.maximum(extra, 0) + self.slack_steps, 0)
         return out
+
+    # ------------------------------------------------------------------ requests (design.md §2, step 1)
+    def request(self, Ts: float, switching: str, authority: bool) -> tuple[np.ndarray, np.ndarray, float]:
+        """Whether each vehicle asks for its next waypoint, and the index ``l'`` it asks with (its
+        membership index w.r.t. that waypoint plus the slack a binding speed bound needs); sets this
+        step's speed bounds :attr:`cap` and request indices :attr:`req_l`.  Returns ``(may, l')`` and
+        the seconds the indices took (``request_ms``)."""
+        cen, hd, _ = self.centres()
+        tr = time.perf_counter()
+        nxt, nh, has = self.centres(1)
+        lp = self.ctl.index(self.X, nxt, nh)
+        t_index = time.perf_counter() - tr
+        self.cap, _ = self.speed_caps(Ts)
+        # a binding speed bound asks for a grant with slack (SpeedSettings.slack_steps) and
+        # only for one whose tube lets the vehicle keep the bound (a stopped vehicle always asks)
+        inside = lp <= self.ctl.N
+        # at rest and denied: ask without slack (its claim would reach behind it: liveness)
+        want = lp + restart_slack(self.slack(Ts, 1, self.cap), self.l, self.denied_last)
+        may = has & self.ctl.may_request(self.X, cen, hd, lp, self.cap if authority else None)
+        may &= (want <= self.ctl.N) | (self.l == 0)
+        lp = np.where(inside, np.minimum(want, self.ctl.N), lp)
+        may &= self.ctl.cap_admits(self.X, nxt, nh, lp, self.cap) | (self.l == 0)
+        self.req_l = lp
+        if switching == "terminal":
+            may &= self.l == 0
+        return may, lp, t_index
 
 
 def _headings(W: np.ndarray) -> np.ndarray:

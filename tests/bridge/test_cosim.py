@@ -118,7 +118,7 @@ def test_junction_token_needs_room_for_the_claim_that_reaches_the_exit_slot(gap_
     zone = Zone("J", (25.0, -5.0), (35.0, 5.0))
     probe = Cosim(CLASSES, [follower], CosimSettings(disturbance="none"), zones=[zone])
     fam = probe.families[cls]
-    guard_hi = probe.zone_hi[0, 0]
+    guard_hi = probe.junctions.hi[0, 0]
     P0 = np.abs(fam.position_sets[0]).max()
     r0 = P0 + 0.5 * np.hypot(vc.length, vc.width)
     slot = W[np.argmax(W[:, 0] - r0 > guard_hi), 0]

@@ -169,7 +169,7 @@ class GrantWatch:
                 self.checked += 1
                 d = point_polygon_distance(np.repeat(poly[None], len(P), 0), P) if len(P) else np.zeros(0)
                 self.inside += int((d <= 0.3).sum())     # within a body radius
-        self.peds = sim._peds()[1].copy()
+        self.peds = sim.filters.peds()[1].copy()
 
     def close(self):
         pass
@@ -262,7 +262,7 @@ class ReachGrantWatch(GrantWatch):
                     if len(P):
                         d = point_polygon_distance(np.repeat(box[None], len(P), 0), P)
                         self.inside += int((d <= 0.3).sum())     # within a body radius
-        self.peds = sim._peds()[1].copy()
+        self.peds = sim.filters.peds()[1].copy()
 
 
 @pytest.mark.parametrize("mode", ["guard", "ignore"])
@@ -339,7 +339,7 @@ def test_authority_mode_the_pedestrian_rule_and_the_tm_share_the_requests_reach_
     rule = PedestrianRule(PedestrianSettings(), [CROSSING], s.Ts)
     sim = Cosim(CLASSES, [spec], s, world=StandingPedestrian(10.0), pedestrians=rule)
     calls = []
-    _counting(sim, "_reach_claims", calls)
+    _counting(sim.claims, "reach_claims", calls)
     sim.run(1)
     per_step = []
     for _ in range(300):

@@ -72,31 +72,32 @@ def test_grid_junctions_authority(grid_cfg, tmp_path):
 
 def test_admission_on_the_near_vehicles_decides_as_on_all(grid_cfg, tmp_path, monkeypatch):
     """Admission (condition (12)) computes the claims now of only the vehicles whose claims in force
-    after the step's decision come near the entry claims (``Cosim._near_rows``: the fresh claims lie in
+    after the step's decision come near the entry claims (``FleetClaims.near_rows``: the fresh claims lie in
     those).  On the shared grid with real SUMO, at every admission the decision is the one taken
     against every vehicle's fresh claims; the rule is exercised (vehicles left out, candidates
     admitted and refused)."""
     from bridge import cosim as cosim_mod
+    from bridge.fleet_claims import FleetClaims
     from tm.reach import ReachClaims
 
     seen = {"steps": 0, "left_out": 0, "admitted": 0, "refused": 0}
     sims = []
-    real_admit, real_near = cosim_mod.admit_reach, cosim_mod.Cosim._near_rows
+    real_admit, real_near = cosim_mod.admit_reach, FleetClaims.near_rows
 
-    def near(self, ids, centre, entry):
+    def near(self, t, ids, centre, entry):
         sims[:] = [self]
-        got = real_near(self, ids, centre, entry)
+        got = real_near(self, t, ids, centre, entry)
         if got is not None:
             seen["left_out"] += int((~got).sum())
         return got
 
     def admit(current, candidates, check):
         ok = real_admit(current, candidates, check)
-        sim = sims[0] if sims else None
-        n = sum(len(g.ids) for g in sim.groups.values()) if sim is not None else 0
+        claims = sims[0] if sims else None  # the run's FleetClaims
+        n = sum(len(g.ids) for g in claims.groups.values()) if claims is not None else 0
         if n:  # the footprints are the last n rows: with every vehicle's fresh claims before them
             foot = current.take(np.arange(len(current) - n, len(current)))
-            full = real_admit(ReachClaims.concat(sim._reach_claims(), foot), candidates, check)
+            full = real_admit(ReachClaims.concat(claims.reach_claims(), foot), candidates, check)
             np.testing.assert_array_equal(ok, full)
             seen["steps"] += 1
         seen["admitted"] += int(ok.sum())
@@ -104,7 +105,7 @@ def test_admission_on_the_near_vehicles_decides_as_on_all(grid_cfg, tmp_path, mo
         return ok
 
     monkeypatch.setattr(cosim_mod, "admit_reach", admit)
-    monkeypatch.setattr(cosim_mod.Cosim, "_near_rows", near)
+    monkeypatch.setattr(FleetClaims, "near_rows", near)
     opts = _opts("authority")
     opts.duration = 60.0
     s = run_sumo(str(grid_cfg), tmp_path / "out", opts)

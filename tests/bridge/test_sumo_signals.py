@@ -132,12 +132,12 @@ def test_game_corridor_holds_only_at_sumos_reds_and_goes_on_green(tmp_path, monk
     SUMO's distance to it (tolerance 0.5 m as above; measured < 0.01 m).  Every vehicle held
     before the switch goes once its light is green and crosses its line (no vehicle stays held
     after green), none on red (SUMO's view and ``red_violations``)."""
-    import bridge.cosim as cosim
+    from bridge.request_filters import RequestFilters
     from sumo_nets.sumo_tools import sumo_home
 
     checked, bad, held_before = [0], [], {}
     player, watch = GamePlayer(50.0, 3), RedWatch()
-    inner = cosim.Cosim._signals
+    inner = RequestFilters._signals
 
     def signals(self, state):
         out = inner(self, state)
@@ -162,7 +162,7 @@ def test_game_corridor_holds_only_at_sumos_reds_and_goes_on_green(tmp_path, monk
                 held_before[vid] = ours
         return out
 
-    monkeypatch.setattr(cosim.Cosim, "_signals", signals)
+    monkeypatch.setattr(RequestFilters, "_signals", signals)
     base = sumo_world.observers_for
     monkeypatch.setattr(sumo_world, "observers_for", lambda *a, **k: base(*a, **k) + [player, watch])
     cfg = sumo_home() / "tools" / "game" / "corridor.sumocfg"
@@ -220,15 +220,15 @@ def test_authority_car_at_the_end_of_green_waits_instead_of_entering_on_red(end_
     """Issue 12: with the time-to-red rule the car is held at the line and crosses on the next
     green (SUMO's view and ``red_violations`` 0, safe); without it (the letter alone, as before)
     it enters on red, SUMO sees it, the counter fires and the run is flagged unsafe (exit 3)."""
-    import bridge.cosim as cosim
     from analysis.safety import UNSAFE_EXIT
+    from bridge.request_filters import RequestFilters
 
     rc, s, watch = _run_late(end_of_green_cfg, tmp_path / "rule", monkeypatch)
     assert rc == 0 and s["complete"], s.get("error")
     assert watch.crossed > 0 and watch.crossed_red == [] and s["red_violations"] == 0
     assert s["signal_withheld"] > 0 and s["vehicles_arrived"] == 1 and s["safe"] is True, s
 
-    monkeypatch.setattr(cosim.Cosim, "_line_timing", lambda self, ids, slot: None)  # the rule off
+    monkeypatch.setattr(RequestFilters, "_line_timing", lambda self, ids, slot: None)  # the rule off
     rc, s, watch = _run_late(end_of_green_cfg, tmp_path / "letter_only", monkeypatch)
     assert s["complete"], s.get("error")
     assert len(watch.crossed_red) == 1 and s["red_violations"] == 1
