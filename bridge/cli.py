@@ -314,6 +314,11 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--frame", choices=["auto", "path", "road"], default="auto",
                    help="the plant's frame: path (authority default): stepped along its route, turns at the "
                         "curve speed; road (paper default): errors in the waypoint segment's frame")
+    r.add_argument("--arrival", choices=["stop", "pass"], default="stop",
+                   help="authority mode on SUMO networks: stop (default): a vehicle comes to rest at its "
+                        "route's end; pass: a route ending where no other edge enters (the network's "
+                        "boundary) is left at speed, as SUMO's vehicles leave it (its stop point runs out "
+                        "past the end)")
     r.add_argument("--speed-limits", choices=["obey", "ignore"], default="obey",
                    help="obey (default): lanes' speed limits bound the vehicles' speed (with look-ahead); "
                         "ignore: only the class bound (the KPI speed_limit_excess_max still measures them)")

@@ -74,10 +74,22 @@ class VehicleSpec:
     speed_limits: np.ndarray | None = None
     #: signalised stop lines the route crosses (positions along these waypoints), see tm.signals
     stop_lines: StopLines | None = None
+    #: the waypoint at which the vehicle arrives, passing it at speed; the waypoints after it are a
+    #: run-out beyond the route's end (where nothing else drives: a network's dead end) on which the
+    #: vehicle is never driven -- its stop point and claims may reach there, so it need not brake
+    #: for the end of its route (SUMO's vehicles leave there at speed).  None: the vehicle arrives
+    #: at rest on its last waypoint.
+    arrive_k: int | None = None
+
+    @property
+    def arrival_index(self) -> int:
+        """Index of the waypoint the vehicle arrives at (:attr:`arrive_k`, or the last)."""
+        return len(self.waypoints) - 1 if self.arrive_k is None else int(self.arrive_k)
 
     @property
     def route_length_m(self) -> float:
-        return float(np.linalg.norm(np.diff(self.waypoints, axis=0), axis=1).sum())
+        W = np.asarray(self.waypoints, dtype=float)[:self.arrival_index + 1]
+        return float(np.linalg.norm(np.diff(W, axis=0), axis=1).sum())
 
 
 @dataclass(frozen=True)
@@ -307,8 +319,9 @@ class Cosim:
                 raise ValueError(f"vehicle {spec.id}: {exc}") from None
             self._speeds[spec.id] = rs
             rec = self.records.get(spec.id)
-            if rec is not None:
-                rec.free_flow_s = free_flow_time(rs.arc, rs.lane, 0.5 * vc.length)
+            if rec is not None:  # up to the arrival waypoint (a run-out past it is never driven)
+                e = spec.arrival_index + 1
+                rec.free_flow_s = free_flow_time(rs.arc[:e], rs.lane[:e], 0.5 * vc.length)
         return rs
 
     # -------------------------------------------------------------- counters
@@ -527,9 +540,10 @@ class Cosim:
             self._window_exits += int(np.sum(along > self.claims.ahead(c)))
 
     def _arrive(self, t_s: float) -> None:
-        """Step 5: vehicles at their last waypoint with ``l = 0`` arrive at ``t_s`` and leave the world."""
+        """Step 5: vehicles at their last waypoint with ``l = 0``, or past their arrival waypoint
+        (:attr:`VehicleSpec.arrive_k`), arrive at ``t_s`` and leave the world."""
         for g in self._live():
-            done = g.at_last & (g.l == 0)
+            done = g.arrived()
             if done.any():
                 self._flush(g, done)
                 for i in np.nonzero(done)[0]:
@@ -624,7 +638,7 @@ class Cosim:
             world = (W, H)
             W, H = self.paths.waypoints(sp.id, W, rs.arc), np.zeros(len(W))
         x0 = g.vclass.model.equilibrium(W[0])
-        g.add(sp.id, W, H, x0, int(g.ctl.index(x0[None], W[:1], H[:1])[0]), rs, world=world)
+        g.add(sp.id, W, H, x0, int(g.ctl.index(x0[None], W[:1], H[:1])[0]), rs, world=world, k_end=sp.arrive_k)
         self.records[sp.id].admitted_s = t_s
         if sp.stop_lines is not None:
             reach = self.junctions.classes[sp.vclass].hold + 0.5 * g.vclass.length
@@ -695,8 +709,9 @@ def _used_classes(classes, specs) -> dict:
 
 def validate_specs(specs, classes: dict, path_frame: bool) -> None:
     """Check every spec before anything runs: waypoints (K >= 2, 2) at most the class's delta apart,
-    road-frame routes without turns sharper than the class accepts (``path_frame``: any angle),
-    speed tables of one entry per waypoint, unique ids; a ValueError names the vehicle and the field."""
+    road-frame routes without turns sharper than the class accepts (``path_frame``: any angle), an
+    arrival waypoint before the last, speed tables of one entry per waypoint, unique ids; a
+    ValueError names the vehicle and the field."""
     for s in specs:
         W = np.asarray(s.waypoints, dtype=float)
         if W.ndim != 2 or W.shape[1] != 2 or len(W) < 2:
@@ -716,6 +731,9 @@ def validate_specs(specs, classes: dict, path_frame: bool) -> None:
                 raise ValueError(
                     f"vehicle {s.id}: its route turns by {turn[i]:.1f} deg at waypoint {i + 1}; class "
                     f"{s.vclass!r} (road frame) accepts at most {model.turn_max_deg} deg between segments")
+        if s.arrive_k is not None and not (isinstance(s.arrive_k, (int, np.integer)) and 1 <= s.arrive_k < len(W) - 1):
+            raise ValueError(f"vehicle {s.id}: arrive_k must be an int in 1 .. {len(W) - 2} (a waypoint before the "
+                             f"last, the run-out after it), got {s.arrive_k!r}")
     if len({s.id for s in specs}) != len(specs):
         raise ValueError("vehicle ids must be unique")
     for s in specs:

@@ -113,7 +113,8 @@ class FleetClaims:
         (``world.claim_pads``; zeros without it or in paper mode)."""
         if not (self.authority and hasattr(self.world, "claim_pads")):
             return np.zeros((len(g.ids), 4))
-        return self._pad_memo.pads(id(g), g.ids, np.minimum(g.k + offset, g.K - 1), offset)
+        # a run-out past the arrival waypoint (never driven): the arrival waypoint's padding
+        return self._pad_memo.pads(id(g), g.ids, np.minimum(g.k + offset, g.k_end), offset)
 
     def fleet_pads(self) -> np.ndarray:
         """:meth:`group_pads` of every vehicle, in fleet order."""

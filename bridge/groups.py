@@ -60,12 +60,14 @@ class _Group:
         self.req_l = np.zeros(0, dtype=np.intp)  # request indices of the last TM state
         self.cap = np.zeros(0)                   # this step's speed bounds (m/s), see speed_caps
         self.excess = np.zeros(0)                # largest speed over the front's lane limit so far (m/s)
+        self.k_end = np.zeros(0, dtype=np.intp)  # arrival waypoints (K - 1: at rest on the last; see arrived)
         self.binds = np.zeros(0, dtype=bool)     # whether some speed bound of the route lies below v_max
 
-    def add(self, vid, W, H, x0, l0, speeds: RouteSpeeds | None = None, world=None):
+    def add(self, vid, W, H, x0, l0, speeds: RouteSpeeds | None = None, world=None, k_end: int | None = None):
         """Add a vehicle: waypoints ``W`` (K, 2) and headings ``H`` (K,) in the controller's frame,
         state ``x0``, index ``l0``; ``world``: ``(W, H)`` in the world when the controller's frame
-        is not (a path-frame plant), else the same."""
+        is not (a path-frame plant), else the same; ``k_end``: its arrival waypoint
+        (:attr:`bridge.cosim.VehicleSpec.arrive_k`; None: the last, reached at rest)."""
         K = len(W)
         Ww, Hw = (W, H) if world is None else world
         live = int(self.K.sum())
@@ -111,6 +113,7 @@ class _Group:
         self.excess = np.append(self.excess, -np.inf)
         self.binds = np.append(self.binds, speeds is not None and
                                bool(np.min(speeds.bound) < self.v_max - tol.SPEED_BOUND_TOL))
+        self.k_end = np.append(self.k_end, K - 1 if k_end is None else int(k_end))
 
     def remove(self, mask):
         keep = ~mask
@@ -122,11 +125,26 @@ class _Group:
         self.speed_sum, self.steps = self.speed_sum[keep], self.steps[keep]
         self.denied_last, self.req_l = self.denied_last[keep], self.req_l[keep]
         self.cap, self.excess, self.binds = self.cap[keep], self.excess[keep], self.binds[keep]
+        self.k_end = self.k_end[keep]
 
     @property
     def at_last(self) -> np.ndarray:
         """Whether each vehicle's current waypoint is its route's last."""
         return self.k == self.K - 1
+
+    def arrived(self) -> np.ndarray:
+        """Which vehicles arrive now: at rest on their last waypoint (``l = 0`` there), or, with a
+        run-out past their arrival waypoint ``k_end`` (:attr:`bridge.cosim.VehicleSpec.arrive_k`),
+        once their stop point is at or past it and their position has passed it along the run-out's
+        first segment (at whatever speed: SUMO's vehicles leave at their route's end at speed)."""
+        done = (self.k_end == self.K - 1) & self.at_last & (self.l == 0)
+        run = np.flatnonzero((self.k_end < self.K - 1) & (self.k >= self.k_end))
+        if len(run):
+            end = self._wbuf[self.start[run] + self.k_end[run]]
+            h = self._wbuf[self.start[run] + self.k_end[run] + 1, _H]  # the run-out's first segment
+            along = (self.X[run, 0] - end[:, _X]) * np.cos(h) + (self.X[run, 1] - end[:, _Y]) * np.sin(h)
+            done[run[along >= 0.0]] = True
+        return done
 
     def centres(self, offset=0):
         """Waypoints ``k + offset`` (clipped to the last), their headings, and whether they exist."""

@@ -178,8 +178,10 @@ class RequestFilters:
         fn = getattr(self.world, "claim_pads", None) if self.authority else None
         pads = None
         if fn is not None:  # the claims' body padding along a route (SUMO: bridge.sumo_body)
-            def pads(rows, idx, ids=state.ids):
-                p = fn([ids[r] for r in rows.tolist()], idx)
+            k_end = np.concatenate([g.k_end for g in self._live()])
+
+            def pads(rows, idx, ids=state.ids):  # a run-out (never driven): the arrival waypoint's
+                p = fn([ids[r] for r in rows.tolist()], np.minimum(idx, k_end[rows]))
                 return np.zeros((len(idx), 4)) if p is None else p
         fleet = JunctionFleet(state.ids, state.family, cur_lo, cur_hi,
                               tuple((g.W, g.H, g.k) for g in self._live()), pads)

@@ -122,7 +122,8 @@ class SumoWorld:
         network's geometry."""
         if self.net is None:
             return None
-        return self.route_body(spec.id).leans(spec.waypoints, self._waypoint_arcs(spec))
+        lean = self.route_body(spec.id).leans(_driven(spec), self._waypoint_arcs(spec))
+        return np.concatenate([lean, np.zeros(len(spec.waypoints) - 1 - len(lean))])  # a run-out: straight
 
     def _waypoint_arcs(self, spec: VehicleSpec) -> np.ndarray:
         """Arc positions of ``spec``'s waypoints on its route polyline (kept per vehicle).  The
@@ -131,7 +132,7 @@ class SumoWorld:
         (:meth:`RouteBody.project_along`); other waypoints are searched one after the other."""
         got = self._arcs.get(spec.id)
         if got is None:
-            W = np.asarray(spec.waypoints, dtype=float)
+            W = _driven(spec)
             r = self.routes[spec.id]
             RW, RA = np.asarray(r.waypoints, dtype=float), np.asarray(r.arc_length, dtype=float)
             hint = None
@@ -155,9 +156,9 @@ class SumoWorld:
         t = self._pads.get(spec.id)
         if t is None:
             b = self.route_body(spec.id)
-            W = np.asarray(spec.waypoints, dtype=float)
+            W = _driven(spec)  # a run-out past the arrival waypoint is never driven: no padding rows
             arc = self._waypoint_arcs(spec)
-            H = spec_headings(W) if headings is None else np.asarray(headings, dtype=float)
+            H = spec_headings(W) if headings is None else np.asarray(headings, dtype=float)[:len(W)]
             t = self._pads[spec.id] = b.pad_table(arc, W, H, box_lo, box_hi, frame)
             self._j0.pop(spec.id, None)
             self._pad_rows.pop(spec.id, None)
@@ -382,6 +383,28 @@ class SumoWorld:
         return self._persons
 
 
+def _driven(spec: VehicleSpec) -> np.ndarray:
+    """The waypoints of ``spec`` up to its arrival waypoint (a run-out after it is never driven)."""
+    return np.asarray(spec.waypoints, dtype=float)[:spec.arrival_index + 1]
+
+
+def run_out(W: np.ndarray, limits: np.ndarray, vc) -> tuple[np.ndarray, np.ndarray, int]:
+    """Waypoints ``W`` (K, 2) with a straight run-out past their last along the last segment, long
+    enough for the class to come to rest from its top speed at its comfort deceleration plus three
+    waypoint gaps (so that the stop point never makes it brake for the route's end), waypoints
+    ``delta`` apart at the last lane limit; returns them, their limits and the arrival index K - 1
+    (:attr:`bridge.cosim.VehicleSpec.arrive_k`)."""
+    W = np.asarray(W, dtype=float)
+    d = W[-1] - W[-2]
+    d = d / np.hypot(*d)
+    delta = float(vc.model.delta)
+    length = float(vc.v_max) ** 2 / (2.0 * float(vc.comfort_decel)) + 3.0 * delta
+    steps = delta * np.arange(1, int(np.ceil(length / delta)) + 1)
+    ext = W[-1] + steps[:, None] * d[None, :]
+    lim = np.asarray(limits, dtype=float)
+    return np.vstack([W, ext]), np.concatenate([lim, np.full(len(ext), lim[-1])]), len(W) - 1
+
+
 def junction_zones(net_path) -> list[Zone]:
     """Every junction where two or more edges enter, as a zone (its shape's bounding box)."""
     root = parse_xml(net_path).getroot()
@@ -533,6 +556,7 @@ def run_sumo(target: str, out: Path, opts, observers_extra: list | None = None) 
                                     controller=getattr(opts, "controller", "paper"),
                                     claim_cache=getattr(opts, "claim_cache", None) or "on",
                                     frame=getattr(opts, "frame", None) or "auto",
+                                    arrival=getattr(opts, "arrival", None) or "stop",
                                     speed_limits=getattr(opts, "speed_limits", None) or "obey",
                                     lat_accel=SpeedSettings.from_options(opts).lat_accel
                                     if SpeedSettings.from_options(opts).curves else 0.0))
@@ -584,18 +608,22 @@ def run_sumo(target: str, out: Path, opts, observers_extra: list | None = None) 
                 limits = geo.speed_limits(r)[kept]
                 arc = r.arc_length[kept].astype(float)
                 arc[0] = min(max(s0, 0.0), 0.5 * r.length_m)  # trim_start's first point
+                arrive_k = None
                 if getattr(opts, "controller", "paper") == "authority":
                     # stop with the whole body on the last lane: SUMO clamps a front bumper pushed
                     # past a dead end back onto the lane (measured: a 0.3 m overlap with a close follower)
                     n = max(int(np.sum(arc <= r.length_m - s0)), 2)
                     W, limits, arc = W[:n], limits[:n], arc[:n]
                 lines = route_stop_lines(geo, r, arc, slots)
+                if summary["options"]["arrival"] == "pass" and getattr(opts, "controller", "paper") == "authority" \
+                        and geo.ends_at_boundary(pv.edges[-1]):
+                    W, limits, arrive_k = run_out(W, limits, classes[c])
             except RouteError as exc:  # one vehicle never ends the run: reported, the rest run
                 undrivable[pv.id] = (pv, str(exc))
                 continue
             routes[pv.id] = r
             specs.append(VehicleSpec(id=pv.id, vclass=c, waypoints=W, depart_s=pv.depart_s - begin,
-                                     speed_limits=limits, stop_lines=lines))
+                                     speed_limits=limits, stop_lines=lines, arrive_k=arrive_k))
         summary["vehicles_undrivable"] = len(undrivable)
         world = SumoWorld(adapter, {pv.id: pv for pv in demand.vehicles if pv.id in routes}, routes, slots=slots,
                           net=geo)

@@ -569,6 +569,16 @@ class NetGeometry:
         """The speed limit of the lane under each waypoint of ``route`` (m/s, (K,))."""
         return np.array([self.lane_speed(lane) for lane in route.lane_ids], dtype=float)
 
+    def ends_at_boundary(self, edge_id: str) -> bool:
+        """Whether edge ``edge_id`` is the only edge entering the junction it ends at (a dead end at
+        the network's boundary, or a fringe node whose other edges only leave it): no other stream
+        arrives there, so a vehicle whose route ends there may run on past the end."""
+        try:
+            node = self._net.getEdge(edge_id).getToNode()
+        except KeyError:
+            raise RouteError(f"unknown edge {edge_id!r}") from None
+        return [e.getID() for e in node.getIncoming() if e.getFunction() != "internal"] == [edge_id]
+
     def lane_count(self, edge_id: str) -> int:
         """Number of lanes of an edge."""
         return self._net.getEdge(edge_id).getLaneNumber()
