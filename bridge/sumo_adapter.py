@@ -70,36 +70,25 @@ from __future__ import annotations
 
 import os
 import shutil
-import subprocess
 import tempfile
-import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterable, Sequence
 
 import numpy as np
 
-from bridge.demand import Demand, DemandError, PlannedVehicle, VehicleType, needs_routing, read_demand
-from bridge.sumo_inputs import InputError, PreparedInputs, parse_xml
+from bridge.demand import Demand, DemandError, PlannedVehicle, needs_routing, read_demand
+from bridge.sumo_inputs import PreparedInputs
+from bridge.sumo_runs import (BACKENDS, SumoError, backend_errors, backend_module, check_xml, expand_demand,
+                              preflight as check_command, run_native, sumo_home)
 
 __all__ = ["SumoError", "CollisionEvent", "VehicleInfo", "SumoAdapter"]
 
-BACKENDS = ("libsumo", "traci")
 _REMOVE_ARRIVED = 2  # libsumo/traci constants.REMOVE_ARRIVED
-_REMOVE_VAPORIZED = 3  # libsumo/traci constants.REMOVE_VAPORIZED
 #: ``moveToXY``'s keepRoute: bit 0, map onto the vehicle's route; bit 1, keep the exact position,
 #: lateral offset included (SUMO's documented semantics; measured on 1.28: getPosition returns the
 #: pushed point to round-off).  With 1 alone SUMO puts the front on the lane's centre line.
 KEEP_ROUTE = 3
-#: SUMO's desiredMaxSpeed of bicycles (``DEFAULT_BICYCLE_SPEED``, 20 km/h): their vType's maxSpeed
-#: is 50 km/h, but SUMO drives them at most 20 km/h x speedFactor (measured: 5.89 m/s = 5.56 x 1.06
-#: alone on a 13.89 m/s road).  libsumo has no getter for desiredMaxSpeed; a vType's own one is not read.
-BICYCLE_DESIRED_MAX_SPEED = 20.0 / 3.6
-
-
-class SumoError(RuntimeError):
-    """SUMO failed to start or failed during the run; the message carries SUMO's own."""
-
 
 @dataclass(frozen=True)
 class CollisionEvent:
@@ -142,20 +131,23 @@ class VehicleInfo:
     edges: tuple[str, ...]
 
 
-def _sumo_home() -> Path:
-    from sumo_nets.sumo_tools import sumo_home
+def _inputs(sumocfg, net, routes) -> tuple[Path | None, Path, list[Path], list[Path]]:
+    """``(configuration, network, route files, additional files)`` of :meth:`SumoAdapter.start`'s
+    arguments: a ``.sumocfg``'s own (``routes`` replacing its route files), or a network and route
+    files; a :class:`SumoError` for an unreadable configuration or neither given."""
+    from sumo_nets.scenario import ScenarioError, read_sumocfg
 
-    return sumo_home()
-
-
-def _check_xml(kind: str, path: Path) -> None:
-    """Raise SumoError naming ``path`` unless it exists and is well-formed XML."""
-    if not path.is_file():
-        raise SumoError(f"SUMO {kind} {path} does not exist")
-    try:
-        parse_xml(path)  # gzipped files as SUMO reads them
-    except InputError as exc:
-        raise SumoError(f"SUMO {kind} {exc}") from None
+    listed = (lambda r: [] if r is None else [Path(r)] if isinstance(r, (str, os.PathLike))  # noqa: E731
+              else [Path(x) for x in r])
+    if sumocfg is not None:
+        try:
+            cfg = read_sumocfg(sumocfg)
+        except ScenarioError as exc:
+            raise SumoError(str(exc)) from None
+        return cfg.path, cfg.net, list(cfg.routes) if routes is None else listed(routes), list(cfg.additional)
+    if net is None:
+        raise SumoError("start: give a sumocfg or a net (and route files)")
+    return None, Path(net).resolve(), listed(routes), []
 
 
 class SumoAdapter:
@@ -204,137 +196,13 @@ class SumoAdapter:
         """Whether a simulation is open."""
         return self._api is not None
 
-    def _backend_module(self):
-        if self.backend == "libsumo":
-            import libsumo
+    def run_native(self, sumocfg: str | os.PathLike, **kw) -> dict:
+        """:func:`bridge.sumo_runs.run_native` with this adapter's backend (``--baseline sumo``)."""
+        return run_native(self.backend, sumocfg, **kw)
 
-            return libsumo
-        import traci
-
-        return traci
-
-    def _errors(self, mod) -> tuple[type[BaseException], ...]:
-        if self.backend == "libsumo":
-            return (mod.TraCIException, mod.FatalTraCIError)
-        return (mod.exceptions.TraCIException, mod.exceptions.FatalTraCIError, ConnectionError, OSError)
-
-    def run_native(self, sumocfg: str | os.PathLike, *, duration_s: float, seed: int,
-                   tripinfo_path: str | os.PathLike, begin_s: float = 0.0, step_length: float | None = None,
-                   extra_args: Iterable[str] = ()) -> dict:
-        """Run a configuration with SUMO's own drivers (no override): the ``--baseline sumo``.
-
-        The window is ``begin_s .. begin_s + duration_s``; ``step_length`` None keeps the
-        configuration's own (SUMO's default 1 s if it sets none).  Same collision options as
-        :meth:`start`; returns steps, unique collision pairs, the run's simulated seconds and
-        the demand inside the window (``vehicles_in_window``: vehicles that departed plus those
-        still waiting for insertion at the end; vehicles SUMO loaded ahead of a departure
-        beyond the window are not counted).  Raises :class:`SumoError` on SUMO's errors.
-        """
-        mod = self._backend_module()
-        errors = self._errors(mod)
-        end = begin_s + duration_s
-        args = ["sumo", "-c", str(sumocfg), "--seed", str(seed), "--begin", f"{begin_s:.10g}",
-                "--collision.action", "warn", "--collision.check-junctions", "true",
-                "--collision.mingap-factor", "0", "--tripinfo-output", str(tripinfo_path),
-                "--no-step-log", "true", "--end", f"{end:.10g}", *[str(a) for a in extra_args]]
-        if step_length is not None:
-            args += ["--step-length", f"{step_length:.10g}"]
-        pairs: set = set()
-        steps = departed = 0
-        try:
-            mod.start(args)
-            while mod.simulation.getTime() < end - 1e-9 and (
-                    steps == 0 or mod.simulation.getMinExpectedNumber() > 0):
-                mod.simulationStep()
-                steps += 1
-                departed += mod.simulation.getDepartedNumber()
-                for c in mod.simulation.getCollisions():
-                    pairs.add(tuple(sorted((c.collider, c.victim))))
-            simulated = float(mod.simulation.getTime()) - begin_s
-            in_window = departed + len(mod.simulation.getPendingVehicles())
-        except errors as exc:
-            raise SumoError(f"SUMO failed running {sumocfg} with its own drivers: {exc}") from None
-        finally:
-            try:
-                mod.close()
-            except errors:
-                pass
-        return {"steps": steps, "collision_pairs": sorted(pairs), "simulated_s": round(simulated, 3),
-                "vehicles_in_window": in_window}
-
-    def expand_demand(self, sumocfg: str | os.PathLike, inputs: PreparedInputs, *, begin_s: float,
-                      end_s: float, seed: int, step_length: float, work_dir: str | os.PathLike) -> Demand:
-        """The demand of a configuration as SUMO itself expands it, inside ``begin_s .. end_s``.
-
-        SUMO runs the configuration (its own parser: gzip, route and additional files,
-        flows, ``probability`` and ``exp(...)`` draws, vType and route distributions, all
-        with ``seed``) and every vehicle is removed the moment SUMO inserts it, so the
-        network stays empty and each one departs at its requested time (one SUMO cannot
-        insert even then keeps the route it was loaded with).  Recorded per vehicle:
-        id, vType (the one drawn from a distribution), route (as routed by SUMO for trips)
-        and requested departure (``depart - departDelay``).  vTypes are read back with
-        ``vehicletype.get*`` (SUMO's defaults per vClass for what a vType leaves out).
-
-        Raises
-        ------
-        SumoError
-            SUMO refused the inputs (its message) or failed.
-        """
-        from sumo_nets.scenario import ScenarioError, read_sumocfg
-
-        try:
-            _check_xml("network", read_sumocfg(sumocfg).net)  # libsumo crashes on a broken one
-        except ScenarioError as exc:
-            raise SumoError(str(exc)) from None
-        mod = self._backend_module()
-        errors = self._errors(mod)
-        base = ["-c", str(sumocfg), *inputs.args("expansion"), "--seed", str(int(seed)),
-                "--begin", f"{begin_s:.10g}", "--step-length", f"{step_length:.10g}",
-                "--no-step-log", "true",
-                "--tripinfo-output", str(Path(work_dir) / "expansion.tripinfo.xml")]
-        # no child-process preflight: the network was checked above (what crashes libsumo) and
-        # prepare_inputs parsed every other file; SUMO's own refusals arrive as TraCIException
-        seen: dict[str, list] = {}  # id -> [requested depart, type, route, order]
-        try:
-            mod.start(["sumo", *base, "--no-warnings", "true", "--end", f"{end_s:.10g}"])
-            veh, sim = mod.vehicle, mod.simulation
-            while sim.getTime() < end_s - 1e-9:
-                mod.simulationStep()
-                now = sim.getTime()
-                departed = list(sim.getDepartedIDList())
-                now_departed = set(departed)
-                for v in sim.getLoadedIDList():  # loaded (possibly ahead of time): requested = now - delay
-                    if v not in now_departed:
-                        seen[v] = [round(now - veh.getDepartDelay(v), 6), veh.getTypeID(v), tuple(veh.getRoute(v)),
-                                   len(seen)]
-                for v in departed:  # the route as SUMO routed it (trips), then out of the network
-                    seen[v] = [round(veh.getDeparture(v) - veh.getDepartDelay(v), 6), veh.getTypeID(v),
-                               tuple(veh.getRoute(v)), seen[v][3] if v in seen else len(seen)]
-                    veh.remove(v, _REMOVE_VAPORIZED)
-            vt = mod.vehicletype
-            types = {}
-            for tid in sorted({r[1] for r in seen.values()}):
-                vclass = vt.getVehicleClass(tid)
-                vmax = float(vt.getMaxSpeed(tid))
-                if vclass == "bicycle":
-                    vmax = min(vmax, BICYCLE_DESIRED_MAX_SPEED)
-                types[tid] = VehicleType(tid, vclass, float(vt.getLength(tid)), float(vt.getWidth(tid)), "",
-                                         accel=float(vt.getAccel(tid)), decel=float(vt.getDecel(tid)),
-                                         max_speed=vmax)
-        except errors as exc:
-            raise SumoError(f"SUMO failed expanding the demand of {sumocfg}: {exc}") from None
-        finally:
-            try:
-                mod.close()
-            except errors:
-                pass
-        vehicles = []
-        for vid, (dep, tid, edges, order) in sorted(seen.items(), key=lambda kv: (kv[1][0], kv[1][3])):
-            if not (begin_s - 1e-9 <= dep < end_s - 1e-9):
-                continue
-            t = types[tid]
-            vehicles.append(PlannedVehicle(vid, tid, float(dep), edges, None, None, t.vclass, t.length, t.width))
-        return Demand(tuple(vehicles), types, tuple(Path(p) for p in inputs.expansion_routes))
+    def expand_demand(self, sumocfg: str | os.PathLike, inputs: PreparedInputs, **kw) -> Demand:
+        """:func:`bridge.sumo_runs.expand_demand` with this adapter's backend."""
+        return expand_demand(self.backend, sumocfg, inputs, **kw)
 
     def start(self, sumocfg: str | os.PathLike | None = None, *, net: str | os.PathLike | None = None,
               routes: str | os.PathLike | Sequence[str | os.PathLike] | None = None, step_length: float = 0.1,
@@ -399,27 +267,10 @@ class SumoAdapter:
                             "(e.g. xvfb-run) or without the GUI")
         if not (step_length > 0):
             raise SumoError(f"step_length: must be > 0 s, got {step_length!r}")
-        from sumo_nets.scenario import ScenarioError, read_sumocfg
-
-        cfg_path = None
-        if sumocfg is not None:
-            try:
-                cfg = read_sumocfg(sumocfg)
-            except ScenarioError as exc:
-                raise SumoError(str(exc)) from None
-            cfg_path, net_path, route_paths = cfg.path, cfg.net, list(cfg.routes)
-            if routes is not None:
-                route_paths = [Path(routes)] if isinstance(routes, (str, os.PathLike)) else [Path(r) for r in routes]
-        else:
-            if net is None:
-                raise SumoError("start: give a sumocfg or a net (and route files)")
-            net_path = Path(net).resolve()
-            route_paths = [] if routes is None else (
-                [Path(routes)] if isinstance(routes, (str, os.PathLike)) else [Path(r) for r in routes])
-        additional = list(cfg.additional) if cfg_path is not None else []
-        _check_xml("network", Path(net_path))
+        cfg_path, net_path, route_paths, additional = _inputs(sumocfg, net, routes)
+        check_xml("network", Path(net_path))
         for r in (route_paths if demand is None else []):  # an expanded demand was read by SUMO
-            _check_xml("route file", Path(r))
+            check_xml("route file", Path(r))
         if work_dir is None:
             self._tmp = Path(tempfile.mkdtemp(prefix="muvsim-sumo-"))
             wd = self._tmp
@@ -451,17 +302,17 @@ class SumoAdapter:
         from sumo_nets.sumo_tools import SumoToolError
 
         try:
-            home = _sumo_home()
+            home = sumo_home()
         except SumoToolError as exc:
             self._cleanup_tmp()
             raise SumoError(str(exc)) from None
         exe = home / "bin" / ("sumo-gui" if gui else "sumo")
-        if not exe.is_file():
-            found = shutil.which(exe.name)
-            if not found:
+        if not exe.is_file():  # else on PATH
+            exe = Path(shutil.which(exe.name) or "")
+            if not exe.name:
                 self._cleanup_tmp()
-                raise SumoError(f"SUMO executable {exe.name!r} not found in {home / 'bin'} nor on PATH")
-            exe = Path(found)
+                raise SumoError(f"SUMO executable {'sumo-gui' if gui else 'sumo'!r} not found in {home / 'bin'} "
+                                "nor on PATH")
         files = inputs.args("no_demand") if inputs is not None else ["--route-files", str(vtypes)]
         args = (["-c", str(cfg_path)] if cfg_path is not None else ["-n", str(net_path)]) + files + [
             "--step-length", f"{step_length:.10g}",
@@ -481,12 +332,16 @@ class SumoAdapter:
         extra = [str(a) for a in extra_args]
         what = f"SUMO ({'configuration ' + str(cfg_path) if cfg_path else 'network ' + str(net_path)})"
         if preflight:
-            self._preflight(home, args + extra, what)
+            try:
+                check_command(home, args + extra, what)
+            except SumoError:
+                self._cleanup_tmp()
+                raise
         out_args = ["--tripinfo-output", str(Path(tripinfo_path).resolve())] if tripinfo_path is not None else []
         self.command = [str(exe), *args, *out_args, *extra]
 
-        mod = self._backend_module()
-        errors = self._errors(mod)
+        mod = backend_module(self.backend)
+        errors = backend_errors(self.backend, mod)
         if self.backend == "libsumo":
             try:  # a running in-process simulation answers; a fresh libsumo raises
                 mod.simulation.getTime()
@@ -512,22 +367,6 @@ class SumoAdapter:
         self._reset_run_state()
         self.demand = demand
         return demand
-
-    def _preflight(self, home: Path, args: list[str], what: str) -> None:
-        exe = home / "bin" / "sumo"
-        exe = exe if exe.is_file() else Path(shutil.which("sumo") or "sumo")
-        try:
-            proc = subprocess.run([str(exe), *args, "--no-warnings", "true"], capture_output=True, text=True,
-                                  timeout=300, env={**os.environ, "SUMO_HOME": str(home)})
-        except (OSError, subprocess.TimeoutExpired) as exc:
-            self._cleanup_tmp()
-            raise SumoError(f"{what}: could not run the sumo check: {exc}") from None
-        if proc.returncode != 0:
-            self._cleanup_tmp()
-            msg = (proc.stderr.strip() or proc.stdout.strip())[-3000:]
-            if proc.returncode < 0:
-                msg = f"SUMO crashed (signal {-proc.returncode}) while loading its inputs. {msg}".strip()
-            raise SumoError(f"{what} failed to start: {msg or f'exit code {proc.returncode}'}")
 
     def close(self) -> None:
         """Close the simulation (flushing SUMO's outputs); safe to call twice or after a failure."""
