@@ -11,7 +11,6 @@ by SUMO itself (no override) for comparison.
 
 from __future__ import annotations
 
-import json
 import sys
 import time
 import traceback

@@ -45,7 +45,7 @@ import numpy as np
 
 from controllers.authority import AuthorityTables
 from controllers.stmpc import FactorMembership
-from controllers.synthesis import SetFamily, along_factor, rotate_pairs
+from controllers.synthesis import SetFamily, rotate_pairs
 from controllers.tolerances import GEOMETRY_TOL, REACH_LOOKUP_MARGIN
 from tm.geometry import broad_phase
 from tm.slot_boxes import SlotBoxes
