@@ -79,11 +79,12 @@ import numpy as np
 
 from bridge.demand import Demand, DemandError, PlannedVehicle, needs_routing, read_demand
 from bridge.sumo_inputs import PreparedInputs
-from bridge.sumo_runs import (BACKENDS, SumoError, backend_errors, backend_module, check_xml, expand_demand,
-                              preflight as check_command, run_native, sumo_home)
+from bridge.sumo_runs import (SumoError, check_xml, expand_demand, preflight as check_command, run_native,
+                              sumo_home)
 
 __all__ = ["SumoError", "CollisionEvent", "VehicleInfo", "SumoAdapter"]
 
+BACKENDS = ("libsumo", "traci")
 _REMOVE_ARRIVED = 2  # libsumo/traci constants.REMOVE_ARRIVED
 #: ``moveToXY``'s keepRoute: bit 0, map onto the vehicle's route; bit 1, keep the exact position,
 #: lateral offset included (SUMO's documented semantics; measured on 1.28: getPosition returns the
@@ -129,6 +130,18 @@ class VehicleInfo:
     length: float
     width: float
     edges: tuple[str, ...]
+
+
+def backend_api(backend: str) -> tuple[object, tuple[type[BaseException], ...]]:
+    """The libsumo module, or traci (its connection-based twin), and the exceptions it raises for
+    SUMO's errors: this module is the only one that imports them (tests/test_layering.py)."""
+    if backend == "libsumo":
+        import libsumo
+
+        return libsumo, (libsumo.TraCIException, libsumo.FatalTraCIError)
+    import traci
+
+    return traci, (traci.exceptions.TraCIException, traci.exceptions.FatalTraCIError, ConnectionError, OSError)
 
 
 def _inputs(sumocfg, net, routes) -> tuple[Path | None, Path, list[Path], list[Path]]:
@@ -198,11 +211,11 @@ class SumoAdapter:
 
     def run_native(self, sumocfg: str | os.PathLike, **kw) -> dict:
         """:func:`bridge.sumo_runs.run_native` with this adapter's backend (``--baseline sumo``)."""
-        return run_native(self.backend, sumocfg, **kw)
+        return run_native(*backend_api(self.backend), sumocfg, **kw)
 
     def expand_demand(self, sumocfg: str | os.PathLike, inputs: PreparedInputs, **kw) -> Demand:
         """:func:`bridge.sumo_runs.expand_demand` with this adapter's backend."""
-        return expand_demand(self.backend, sumocfg, inputs, **kw)
+        return expand_demand(*backend_api(self.backend), sumocfg, inputs, **kw)
 
     def start(self, sumocfg: str | os.PathLike | None = None, *, net: str | os.PathLike | None = None,
               routes: str | os.PathLike | Sequence[str | os.PathLike] | None = None, step_length: float = 0.1,
@@ -340,8 +353,7 @@ class SumoAdapter:
         out_args = ["--tripinfo-output", str(Path(tripinfo_path).resolve())] if tripinfo_path is not None else []
         self.command = [str(exe), *args, *out_args, *extra]
 
-        mod = backend_module(self.backend)
-        errors = backend_errors(self.backend, mod)
+        mod, errors = backend_api(self.backend)
         if self.backend == "libsumo":
             try:  # a running in-process simulation answers; a fresh libsumo raises
                 mod.simulation.getTime()

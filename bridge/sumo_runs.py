@@ -4,7 +4,8 @@
 :func:`expand_demand` lets SUMO expand a configuration's demand (flows, trips, distributions) and
 records it; :func:`preflight` loads a command in a child ``sumo`` before libsumo does.  Neither run
 keeps a simulation open: the stepwise co-simulation is :class:`~bridge.sumo_adapter.SumoAdapter`'s.
-Only ``bridge/`` imports libsumo or traci.
+The SUMO API comes from the adapter (``api``: the libsumo module or traci, ``errors``: the exceptions
+it raises): only ``bridge/sumo_adapter.py`` imports libsumo or traci (tests/test_layering.py).
 """
 
 from __future__ import annotations
@@ -18,10 +19,8 @@ from typing import Iterable
 from bridge.demand import Demand, PlannedVehicle, VehicleType
 from bridge.sumo_inputs import InputError, PreparedInputs, parse_xml
 
-__all__ = ["BACKENDS", "SumoError", "backend_module", "backend_errors", "check_xml", "sumo_home",
-           "run_native", "expand_demand", "preflight"]
+__all__ = ["SumoError", "check_xml", "sumo_home", "run_native", "expand_demand", "preflight"]
 
-BACKENDS = ("libsumo", "traci")
 _REMOVE_VAPORIZED = 3  # libsumo/traci constants.REMOVE_VAPORIZED
 #: SUMO's desiredMaxSpeed of bicycles (``DEFAULT_BICYCLE_SPEED``, 20 km/h): their vType's maxSpeed
 #: is 50 km/h, but SUMO drives them at most 20 km/h x speedFactor (measured: 5.89 m/s = 5.56 x 1.06
@@ -31,24 +30,6 @@ BICYCLE_DESIRED_MAX_SPEED = 20.0 / 3.6
 
 class SumoError(RuntimeError):
     """SUMO failed to start or failed during the run; the message carries SUMO's own."""
-
-
-def backend_module(backend: str):
-    """The libsumo module, or traci (its connection-based twin)."""
-    if backend == "libsumo":
-        import libsumo
-
-        return libsumo
-    import traci
-
-    return traci
-
-
-def backend_errors(backend: str, mod) -> tuple[type[BaseException], ...]:
-    """The exceptions ``mod`` (:func:`backend_module`) raises for SUMO's errors."""
-    if backend == "libsumo":
-        return (mod.TraCIException, mod.FatalTraCIError)
-    return (mod.exceptions.TraCIException, mod.exceptions.FatalTraCIError, ConnectionError, OSError)
 
 
 def sumo_home() -> Path:
@@ -67,7 +48,7 @@ def check_xml(kind: str, path: Path) -> None:
         raise SumoError(f"SUMO {kind} {exc}") from None
 
 
-def run_native(backend: str, sumocfg: str | os.PathLike, *, duration_s: float, seed: int,
+def run_native(api, errors: tuple, sumocfg: str | os.PathLike, *, duration_s: float, seed: int,
                tripinfo_path: str | os.PathLike, begin_s: float = 0.0, step_length: float | None = None,
                extra_args: Iterable[str] = ()) -> dict:
     """Run a configuration with SUMO's own drivers (no override): the ``--baseline sumo``.
@@ -79,8 +60,7 @@ def run_native(backend: str, sumocfg: str | os.PathLike, *, duration_s: float, s
     still waiting for insertion at the end; vehicles SUMO loaded ahead of a departure
     beyond the window are not counted).  Raises :class:`SumoError` on SUMO's errors.
     """
-    mod = backend_module(backend)
-    errors = backend_errors(backend, mod)
+    mod = api
     end = begin_s + duration_s
     args = ["sumo", "-c", str(sumocfg), "--seed", str(seed), "--begin", f"{begin_s:.10g}",
             "--collision.action", "warn", "--collision.check-junctions", "true",
@@ -112,7 +92,7 @@ def run_native(backend: str, sumocfg: str | os.PathLike, *, duration_s: float, s
             "vehicles_in_window": in_window}
 
 
-def expand_demand(backend: str, sumocfg: str | os.PathLike, inputs: PreparedInputs, *, begin_s: float,
+def expand_demand(api, errors: tuple, sumocfg: str | os.PathLike, inputs: PreparedInputs, *, begin_s: float,
                   end_s: float, seed: int, step_length: float, work_dir: str | os.PathLike) -> Demand:
     """The demand of a configuration as SUMO itself expands it, inside ``begin_s .. end_s``.
 
@@ -136,8 +116,7 @@ def expand_demand(backend: str, sumocfg: str | os.PathLike, inputs: PreparedInpu
         check_xml("network", read_sumocfg(sumocfg).net)  # libsumo crashes on a broken one
     except ScenarioError as exc:
         raise SumoError(str(exc)) from None
-    mod = backend_module(backend)
-    errors = backend_errors(backend, mod)
+    mod = api
     base = ["-c", str(sumocfg), *inputs.args("expansion"), "--seed", str(int(seed)),
             "--begin", f"{begin_s:.10g}", "--step-length", f"{step_length:.10g}",
             "--no-step-log", "true",
