@@ -87,9 +87,13 @@ class VehicleSpec:
         return len(self.waypoints) - 1 if self.arrive_k is None else int(self.arrive_k)
 
     @property
+    def driven_waypoints(self) -> np.ndarray:
+        """The waypoints up to the arrival waypoint (a run-out after it is never driven)."""
+        return np.asarray(self.waypoints, dtype=float)[:self.arrival_index + 1]
+
+    @property
     def route_length_m(self) -> float:
-        W = np.asarray(self.waypoints, dtype=float)[:self.arrival_index + 1]
-        return float(np.linalg.norm(np.diff(W, axis=0), axis=1).sum())
+        return float(np.linalg.norm(np.diff(self.driven_waypoints, axis=0), axis=1).sum())
 
 
 @dataclass(frozen=True)
@@ -293,8 +297,6 @@ class Cosim:
         #: sound (``settings.claim_cache``), the requests' claims once per step
         self.claims = FleetClaims(self.groups, self.classes, self.world, self.tm, self.reach, self.paths,
                                   settings.claim_cache, lambda sp: self._route_speeds(sp).arc)
-        #: current claims reused between steps (tm.reach_cache; None: fresh claims every step)
-        self.claim_cache = self.claims.cache
         self._claims_now: ReachClaims | None = None  # authority: this step's claims before the decision
         crossing_gate = None
         if self.authority and pedestrians is not None and crossings:
@@ -325,6 +327,12 @@ class Cosim:
         return rs
 
     # -------------------------------------------------------------- counters
+    @property
+    def claim_cache(self):
+        """Current claims reused between steps (:class:`tm.reach_cache.ClaimCache`; None: fresh claims
+        every step, or paper mode): the fleet claims' own."""
+        return self.claims.cache
+
     @property
     def signal_book(self) -> SignalBook:
         """The vehicles' signalised stop lines (:mod:`tm.signals`)."""
@@ -734,12 +742,11 @@ def validate_specs(specs, classes: dict, path_frame: bool) -> None:
         if s.arrive_k is not None and not (isinstance(s.arrive_k, (int, np.integer)) and 1 <= s.arrive_k < len(W) - 1):
             raise ValueError(f"vehicle {s.id}: arrive_k must be an int in 1 .. {len(W) - 2} (a waypoint before the "
                              f"last, the run-out after it), got {s.arrive_k!r}")
+        if s.speed_limits is not None and len(np.asarray(s.speed_limits)) != len(W):
+            raise ValueError(f"vehicle {s.id}: speed_limits has {len(np.asarray(s.speed_limits))} "
+                             f"entries, one per waypoint ({len(W)}) is needed")
     if len({s.id for s in specs}) != len(specs):
         raise ValueError("vehicle ids must be unique")
-    for s in specs:
-        if s.speed_limits is not None and len(np.asarray(s.speed_limits)) != len(s.waypoints):
-            raise ValueError(f"vehicle {s.id}: speed_limits has {len(np.asarray(s.speed_limits))} "
-                             f"entries, one per waypoint ({len(s.waypoints)}) is needed")
 
 
 def _look_ahead_decel(vc: VehicleClass) -> float:

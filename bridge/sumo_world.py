@@ -121,7 +121,7 @@ class SumoWorld:
         network's geometry."""
         if self.net is None:
             return None
-        lean = self.route_body(spec.id).leans(_driven(spec), self._waypoint_arcs(spec))
+        lean = self.route_body(spec.id).leans(spec.driven_waypoints, self._waypoint_arcs(spec))
         return np.concatenate([lean, np.zeros(len(spec.waypoints) - 1 - len(lean))])  # a run-out: straight
 
     def _waypoint_arcs(self, spec: VehicleSpec) -> np.ndarray:
@@ -131,7 +131,7 @@ class SumoWorld:
         (:meth:`RouteBody.project_along`); other waypoints are searched one after the other."""
         got = self._arcs.get(spec.id)
         if got is None:
-            W = _driven(spec)
+            W = spec.driven_waypoints
             r = self.routes[spec.id]
             RW, RA = np.asarray(r.waypoints, dtype=float), np.asarray(r.arc_length, dtype=float)
             hint = None
@@ -155,7 +155,7 @@ class SumoWorld:
         t = self._pads.get(spec.id)
         if t is None:
             b = self.route_body(spec.id)
-            W = _driven(spec)  # a run-out past the arrival waypoint is never driven: no padding rows
+            W = spec.driven_waypoints  # a run-out past the arrival waypoint is never driven: no padding rows
             arc = self._waypoint_arcs(spec)
             H = spec_headings(W) if headings is None else np.asarray(headings, dtype=float)[:len(W)]
             t = self._pads[spec.id] = b.pad_table(arc, W, H, box_lo, box_hi, frame)
@@ -382,11 +382,6 @@ class SumoWorld:
         return self._persons
 
 
-def _driven(spec: VehicleSpec) -> np.ndarray:
-    """The waypoints of ``spec`` up to its arrival waypoint (a run-out after it is never driven)."""
-    return np.asarray(spec.waypoints, dtype=float)[:spec.arrival_index + 1]
-
-
 def run_out(W: np.ndarray, limits: np.ndarray, vc) -> tuple[np.ndarray, np.ndarray, int]:
     """Waypoints ``W`` (K, 2) with a straight run-out past their last along the last segment, long
     enough for the class to come to rest from its top speed at its comfort deceleration plus three
@@ -592,6 +587,7 @@ def run_sumo(target: str, out: Path, opts, observers_extra: list | None = None) 
         geo = load_net(net)
         routes, specs, undrivable = {}, [], {}
         slots = LinkSlots()
+        authority = getattr(opts, "controller", "paper") == "authority"
         for pv in demand.vehicles:
             c = cls_of[pv.id]
             try:
@@ -608,14 +604,13 @@ def run_sumo(target: str, out: Path, opts, observers_extra: list | None = None) 
                 arc = r.arc_length[kept].astype(float)
                 arc[0] = min(max(s0, 0.0), 0.5 * r.length_m)  # trim_start's first point
                 arrive_k = None
-                if getattr(opts, "controller", "paper") == "authority":
+                if authority:
                     # stop with the whole body on the last lane: SUMO clamps a front bumper pushed
                     # past a dead end back onto the lane (measured: a 0.3 m overlap with a close follower)
                     n = max(int(np.sum(arc <= r.length_m - s0)), 2)
                     W, limits, arc = W[:n], limits[:n], arc[:n]
                 lines = route_stop_lines(geo, r, arc, slots)
-                if summary["options"]["arrival"] == "pass" and getattr(opts, "controller", "paper") == "authority" \
-                        and geo.ends_at_boundary(pv.edges[-1]):
+                if authority and summary["options"]["arrival"] == "pass" and geo.ends_at_boundary(pv.edges[-1]):
                     W, limits, arrive_k = run_out(W, limits, classes[c])
             except RouteError as exc:  # one vehicle never ends the run: reported, the rest run
                 undrivable[pv.id] = (pv, str(exc))
