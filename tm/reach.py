@@ -48,6 +48,7 @@ from controllers.stmpc import FactorMembership
 from controllers.synthesis import SetFamily, rotate_pairs
 from controllers.tolerances import GEOMETRY_TOL, REACH_LOOKUP_MARGIN
 from tm.geometry import broad_phase
+from tm.kernels import reach_boxes, timed_pairs_plain, timed_pairs_tight
 from tm.slot_boxes import SlotBoxes
 
 __all__ = ["ReachModel", "ReachClaims", "reach_claims", "claims_conflict", "pairwise_conflicts", "world_aabb",
@@ -270,18 +271,6 @@ def reach_claims(rm: ReachModel, X: np.ndarray, centre: np.ndarray, heading: np.
     if np.any(index > rm.N) or np.any(index < 0):
         raise ValueError(f"reach_claims: index must lie in 0 .. N = {rm.N}, got {index.min()} .. {index.max()}")
     E = rotate_pairs(X - np.hstack([centre, np.zeros((n, 2))]), -heading)  # segment frame, error
-    k = np.arange(1, K + 1)
-    m = np.maximum(index[:, None] - k[None, :], 0)                      # (n, K)
-    Kr = K - 1  # reach slots; the last slot is T^0 whole
-    mm = m[:, :Kr]
-    # reach intervals per factor: centre A^k e, radius r_k (planar (n, Kr) arrays: contiguous)
-    Aa, Ac = rm.Ak_al[1:], rm.Ak_ac[1:]
-    ra, ry = rm.r_al[1:], rm.r_ac[1:]
-    cp = np.outer(E[:, 0], Aa[:, 0, 0]) + np.outer(E[:, 2], Aa[:, 0, 1])
-    cv = np.outer(E[:, 0], Aa[:, 1, 0]) + np.outer(E[:, 2], Aa[:, 1, 1])
-    cy = np.outer(E[:, 1], Ac[:, 0, 0]) + np.outer(E[:, 3], Ac[:, 0, 1])
-    v_lo = np.maximum(cv - ra[:, 1], T.v_lo[mm])
-    v_hi = np.minimum(cv + ra[:, 1], T.v_hi[mm])
     off = np.broadcast_to(np.asarray(body_offset, dtype=float), (n,))
     c, s = np.abs(np.cos(off)), np.abs(np.sin(off))
     fx = 0.5 * (rm.length * c + rm.width * s)
@@ -290,31 +279,18 @@ def reach_claims(rm: ReachModel, X: np.ndarray, centre: np.ndarray, heading: np.
     if body_pad is not None:
         plo, phi = split_pad(body_pad, n)
         fx_lo, fy_lo, fx_hi, fy_hi = fx + plo[:, 0], fy + plo[:, 1], fx + phi[:, 0], fy + phi[:, 1]
-    fx_lo, fx_hi, fy_lo, fy_hi = fx_lo[:, None], fx_hi[:, None], fy_lo[:, None], fy_hi[:, None]
-    P = np.empty((4, n, K))  # along lo, hi, across lo, hi (segment frame, footprint added below)
-    # tables read just outside the velocity bounds (REACH_LOOKUP_MARGIN: ties at grid points)
-    np.maximum(np.maximum(cp - ra[:, 0], T.h(mm, v_hi + REACH_LOOKUP_MARGIN)), T.p_lo[mm], out=P[0, :, :Kr])
-    np.minimum(np.minimum(cp + ra[:, 0], T.g(mm, v_lo - REACH_LOOKUP_MARGIN)), T.p_hi[mm], out=P[1, :, :Kr])
-    my = mm
-    if rm.across is not None:  # the across factor's own tube, one level of slack (module notes)
-        ly = np.minimum(rm.across.index(E) + 1, index)
-        my = np.maximum(ly[:, None] - k[None, :Kr], 0)
-    np.maximum(cy - ry[:, 0], T.y_lo[my], out=P[2, :, :Kr])
-    np.minimum(cy + ry[:, 0], T.y_hi[my], out=P[3, :, :Kr])
-    P[0, :, Kr:], P[1, :, Kr:] = T.p_lo[0], T.p_hi[0]
-    P[2, :, Kr:], P[3, :, Kr:] = T.y_lo[0], T.y_hi[0]
-    empty = (P[0] > P[1]) | (P[2] > P[3])
-    P[0] -= fx_lo
-    P[1] += fx_hi
-    P[2] -= fy_lo
-    P[3] += fy_hi
-    if empty.any():  # keep empty boxes empty after the footprint
-        P[0][empty] = P[2][empty] = np.inf
-        P[1][empty] = P[3][empty] = -np.inf
-    lo = np.stack([P[0], P[2]], axis=-1)
-    hi = np.stack([P[1], P[3]], axis=-1)
-    out = ReachClaims(centre, heading, lo, hi)
-    return out._with_boxes(_slot_aabb_planar(centre, heading, *P)) if boxes else out
+    # the across factor's own tube, one level of slack (module notes); without it, T^{l-k}'s range
+    ly = index if rm.across is None else np.minimum(rm.across.index(E) + 1, index)
+    # per slot k = 1 .. K-1: the reach's intervals (centre A^k e, radius r_k per factor) cut to
+    # T^{max(l-k, 0)}'s, the tables read just outside the velocity bounds (REACH_LOOKUP_MARGIN:
+    # ties at grid points); the last slot T^0 whole; then the footprint (tm.kernels.reach_boxes)
+    P, W = reach_boxes(E, np.ascontiguousarray(index), np.ascontiguousarray(ly, dtype=np.intp), rm.Ak_al[1:], rm.Ak_ac[1:], rm.r_al[1:],
+                       rm.r_ac[1:], T.v_lo, T.v_hi, T.p_lo, T.p_hi, T.y_lo, T.y_hi, T.G, T.H, float(T.w0),
+                       float(T.dw), REACH_LOOKUP_MARGIN, *(np.ascontiguousarray(f, dtype=float)
+                                                          for f in (fx_lo, fx_hi, fy_lo, fy_hi)),
+                       K, np.ascontiguousarray(centre), np.cos(heading), np.sin(heading), boxes)
+    out = ReachClaims(centre, heading, np.stack([P[0], P[2]], axis=-1), np.stack([P[1], P[3]], axis=-1))
+    return out._with_boxes(W) if boxes else out
 
 
 def split_pad(pad, n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -372,51 +348,24 @@ def _boxes_overlap(ca, ha, la, ua, cb, hb, lb, ub, tol):
     return ~(sep | empty)
 
 
-def _padded_boxes(c: ReachClaims, K: int) -> np.ndarray:
-    b = c.slot_boxes
-    return b if b.shape[2] == K else np.concatenate([b, np.repeat(b[:, :, -1:], K - b.shape[2], axis=2)], axis=2)
-
-
-def _slot_sat(a: ReachClaims, i, b: ReachClaims, j, k, tol: float) -> np.ndarray:
-    """The separating-axis test of slot ``k[t]`` of ``a[i[t]]`` and ``b[j[t]]`` (slots past a
-    shorter horizon are its last slot)."""
-    ka, kb = np.minimum(k, a.lo.shape[1] - 1), np.minimum(k, b.lo.shape[1] - 1)
-    if a.tight is None and b.tight is None:
-        return _boxes_overlap(a.centre[i], a.heading[i], a.lo[i, ka], a.hi[i, ka],
-                              b.centre[j], b.heading[j], b.lo[j, kb], b.hi[j, kb], tol)
-    return a.slot_union().meet(i, ka, b.slot_union(), j, kb, tol)
-
-
 def _timed_conflicts(a: ReachClaims, i, b: ReachClaims, j, tol: float) -> np.ndarray:
-    """``timed`` check: slot boxes (world, :attr:`ReachClaims.slot_boxes`) first, vectorised over
-    pairs and slots; the separating-axis test then on the first slot whose boxes meet, and on every
-    such slot of the pairs (rotated boxes only) where that one is separated."""
-    out = np.zeros(len(i), dtype=bool)
+    """``timed`` check: per pair, the slots in order, the world bounding boxes
+    (:attr:`ReachClaims.slot_boxes`, padded by :data:`PREFILTER_TOL_FACTOR` ``tol``) first and the
+    separating-axis test on the slots whose boxes meet, up to the first that meets
+    (:mod:`tm.kernels`); slots past a shorter horizon are its last slot."""
     if not len(i):
-        return out
-    K = max(a.lo.shape[1], b.lo.shape[1])
-    A, B = _padded_boxes(a, K), _padded_boxes(b, K)
+        return np.zeros(0, dtype=bool)
+    i, j = np.ascontiguousarray(i, dtype=np.intp), np.ascontiguousarray(j, dtype=np.intp)
     pad = PREFILTER_TOL_FACTOR * tol
-    m = A[0][i] <= B[1][j] + pad
-    m &= B[0][j] <= A[1][i] + pad
-    m &= A[2][i] <= B[3][j] + pad
-    m &= B[2][j] <= A[3][i] + pad
-    p = np.flatnonzero(m.any(axis=1))
-    if not len(p):
-        return out
-    mp = m[p]
-    first = mp.argmax(axis=1)
-    hit = _slot_sat(a, i[p], b, j[p], first, tol)
-    out[p[hit]] = True
-    rest = np.flatnonzero(~hit)
-    if len(rest):
-        mp[rest, first[rest]] = False
-        r, k = np.nonzero(mp[rest])
-        if len(r):
-            q = p[rest[r]]
-            h = _slot_sat(a, i[q], b, j[q], k, tol)
-            out[q[h]] = True
-    return out
+    A, B = a.slot_boxes, b.slot_boxes
+    La, Lb = a.lo.shape[1], b.lo.shape[1]
+    if a.tight is None and b.tight is None:
+        return timed_pairs_plain(A, B, a.centre, np.cos(a.heading), np.sin(a.heading), a.lo, a.hi, b.centre,
+                                 np.cos(b.heading), np.sin(b.heading), b.lo, b.hi, i, j, tol, pad)
+    sa, sb = a.slot_union(), b.slot_union()
+    return timed_pairs_tight(A, B, La, sa.centre, np.cos(sa.heading), np.sin(sa.heading), sa.half, sa.start,
+                             sa.count, Lb, sb.centre, np.cos(sb.heading), np.sin(sb.heading), sb.half, sb.start,
+                             sb.count, i, j, tol, pad)
 
 
 def claims_conflict(a: ReachClaims, i, b: ReachClaims, j, check: str = "timed",

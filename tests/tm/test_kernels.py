@@ -1,0 +1,159 @@
+"""The compiled loops (tm/kernels.py) against the numpy formulas they replaced, float for float.
+
+The references below are the numpy code of ``tm.reach`` before the kernels (vectorised over
+vehicles, slots and pairs).  Comparisons are exact (``np.array_equal``: the same IEEE operations in
+the same order; only the sign of a zero may differ, which ``==`` ignores), over random claims with
+empty slots, ties at table grid points, shorter horizons and unions of boxes, and on a real class's
+synthesised tables.
+"""
+
+import numpy as np
+import pytest
+from hypothesis import given, settings, strategies as st
+
+from controllers.classes import get_class
+from controllers.settings import SynthesisSettings
+from controllers.synthesis import rotate_pairs
+from controllers.tolerances import GEOMETRY_TOL, REACH_LOOKUP_MARGIN
+from tm.lane import lane_class
+from tm.reach import (PREFILTER_TOL_FACTOR, ReachClaims, ReachModel, _boxes_overlap, claims_conflict, reach_claims,
+                      slot_aabb, split_pad)
+from tm.slot_boxes import SlotBoxes
+
+
+# ------------------------------------------------------------------ references (numpy, as before)
+def _ref_reach(rm, X, centre, heading, index, body_offset=0.0, body_pad=None):
+    n, K, T = len(X), rm.K, rm.tables
+    E = rotate_pairs(X - np.hstack([centre, np.zeros((n, 2))]), -heading)
+    k = np.arange(1, K + 1)
+    m = np.maximum(index[:, None] - k[None, :], 0)
+    Kr = K - 1
+    mm = m[:, :Kr]
+    Aa, Ac = rm.Ak_al[1:], rm.Ak_ac[1:]
+    ra, ry = rm.r_al[1:], rm.r_ac[1:]
+    cp = np.outer(E[:, 0], Aa[:, 0, 0]) + np.outer(E[:, 2], Aa[:, 0, 1])
+    cv = np.outer(E[:, 0], Aa[:, 1, 0]) + np.outer(E[:, 2], Aa[:, 1, 1])
+    cy = np.outer(E[:, 1], Ac[:, 0, 0]) + np.outer(E[:, 3], Ac[:, 0, 1])
+    v_lo = np.maximum(cv - ra[:, 1], T.v_lo[mm])
+    v_hi = np.minimum(cv + ra[:, 1], T.v_hi[mm])
+    off = np.broadcast_to(np.asarray(body_offset, dtype=float), (n,))
+    c, s = np.abs(np.cos(off)), np.abs(np.sin(off))
+    fx = 0.5 * (rm.length * c + rm.width * s)
+    fy = 0.5 * (rm.length * s + rm.width * c)
+    fx_lo, fx_hi, fy_lo, fy_hi = fx, fx, fy, fy
+    if body_pad is not None:
+        plo, phi = split_pad(body_pad, n)
+        fx_lo, fy_lo, fx_hi, fy_hi = fx + plo[:, 0], fy + plo[:, 1], fx + phi[:, 0], fy + phi[:, 1]
+    P = np.empty((4, n, K))
+    P[0, :, :Kr] = np.maximum(np.maximum(cp - ra[:, 0], T.h(mm, v_hi + REACH_LOOKUP_MARGIN)), T.p_lo[mm])
+    P[1, :, :Kr] = np.minimum(np.minimum(cp + ra[:, 0], T.g(mm, v_lo - REACH_LOOKUP_MARGIN)), T.p_hi[mm])
+    my = mm
+    if rm.across is not None:
+        ly = np.minimum(rm.across.index(E) + 1, index)
+        my = np.maximum(ly[:, None] - k[None, :Kr], 0)
+    P[2, :, :Kr] = np.maximum(cy - ry[:, 0], T.y_lo[my])
+    P[3, :, :Kr] = np.minimum(cy + ry[:, 0], T.y_hi[my])
+    P[0, :, Kr:], P[1, :, Kr:] = T.p_lo[0], T.p_hi[0]
+    P[2, :, Kr:], P[3, :, Kr:] = T.y_lo[0], T.y_hi[0]
+    empty = (P[0] > P[1]) | (P[2] > P[3])
+    P[0] -= fx_lo[:, None]
+    P[1] += fx_hi[:, None]
+    P[2] -= fy_lo[:, None]
+    P[3] += fy_hi[:, None]
+    P[0][empty] = P[2][empty] = np.inf
+    P[1][empty] = P[3][empty] = -np.inf
+    return np.stack([P[0], P[2]], axis=-1), np.stack([P[1], P[3]], axis=-1)
+
+
+def _ref_timed(a, i, b, j, tol):
+    """Every slot (pre-filter, then the separating-axis test on the boxes or unions of boxes)."""
+    K = max(a.lo.shape[1], b.lo.shape[1])
+    out = np.zeros(len(i), dtype=bool)
+    A, B = a.slot_boxes, b.slot_boxes
+    pad = PREFILTER_TOL_FACTOR * tol
+    for t, (p, q) in enumerate(zip(i, j)):
+        for k in range(K):
+            xa, xb = min(k, A.shape[2] - 1), min(k, B.shape[2] - 1)
+            if not (A[0, p, xa] <= B[1, q, xb] + pad and B[0, q, xb] <= A[1, p, xa] + pad and
+                    A[2, p, xa] <= B[3, q, xb] + pad and B[2, q, xb] <= A[3, p, xa] + pad):
+                continue
+            ka, kb = min(k, a.lo.shape[1] - 1), min(k, b.lo.shape[1] - 1)
+            if a.tight is None and b.tight is None:
+                hit = _boxes_overlap(a.centre[p], a.heading[p], a.lo[p, ka], a.hi[p, ka],
+                                     b.centre[q], b.heading[q], b.lo[q, kb], b.hi[q, kb], tol)
+            else:
+                hit = a.slot_union().meet([p], [ka], b.slot_union(), [q], [kb], tol)[0]
+            if hit:
+                out[t] = True
+                break
+    return out
+
+
+# ------------------------------------------------------------------ claims
+@pytest.fixture(scope="module")
+def car_model(shared_set_cache):
+    return lane_class(get_class("car"), SynthesisSettings(cache_dir=shared_set_cache)).reach
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), n=st.integers(1, 30), pad=st.sampled_from([None, 2, 4]),
+       offset=st.booleans())
+def test_reach_claims_equal_the_numpy_formulas(car_model, seed, n, pad, offset):
+    """Random states around random waypoints (some on the tables' velocity grid, where the lookup
+    rounds), random indices 0..N, footprints turned and padded: the same boxes and world boxes."""
+    rm = car_model
+    rng = np.random.default_rng(seed)
+    centre = rng.uniform(-50, 50, (n, 2))
+    heading = rng.uniform(-np.pi, np.pi, n)
+    E = np.column_stack([rng.uniform(-30, 5, n), rng.uniform(-1, 1, n), rng.uniform(-2, 16, n),
+                         rng.uniform(-0.5, 0.5, n)])
+    grid = rng.random(n) < 0.3  # velocities on the tables' grid points: ties in the lookup
+    E[grid, 2] = rm.tables.w0 + rm.tables.dw * rng.integers(0, rm.tables.G.shape[1], grid.sum())
+    X = np.hstack([centre, np.zeros((n, 2))]) + rotate_pairs(E, heading)
+    index = rng.integers(0, rm.N + 1, n)
+    body_pad = None if pad is None else rng.uniform(0, 2, (n, pad))
+    body_offset = rng.uniform(0, 0.5, n) if offset else 0.0
+    got = reach_claims(rm, X, centre, heading, index, body_offset=body_offset, body_pad=body_pad)
+    lo, hi = _ref_reach(rm, X, centre, heading, index, body_offset, body_pad)
+    assert np.array_equal(got.lo, lo) and np.array_equal(got.hi, hi)
+    assert np.array_equal(got.slot_boxes, slot_aabb(centre, heading, lo, hi))
+
+
+# ------------------------------------------------------------------ the timed check
+def _random_claims(rng, n, K, tight):
+    centre = rng.uniform(-15, 15, (n, 2))
+    heading = rng.uniform(-np.pi, np.pi, n)
+    lo = rng.uniform(-6, 2, (n, K, 2))
+    hi = lo + rng.uniform(-0.5, 6, (n, K, 2))          # some empty slots (hi < lo)
+    c = ReachClaims(centre, heading, lo, hi)
+    if not tight:
+        return c
+    count = rng.integers(0, 3, (n, K))
+    q = int(count.sum())
+    start = (np.cumsum(count.ravel()) - count.ravel()).reshape(n, K)
+    sb = SlotBoxes(rng.uniform(-15, 15, (q, 2)), rng.uniform(-np.pi, np.pi, q), rng.uniform(0.1, 3, (q, 2)),
+                   start, count)
+    return ReachClaims(centre, heading, lo, hi, sb)
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), ka=st.integers(1, 6), kb=st.integers(1, 6),
+       tight=st.sampled_from([(False, False), (True, False), (True, True)]))
+def test_timed_check_equals_every_slot_by_numpy(seed, ka, kb, tight):
+    """Random claims of different horizons, plain or unions of boxes (and mixed), random pairs:
+    the kernel's answer is the reference's, slot by slot, and both see hits and misses."""
+    rng = np.random.default_rng(seed)
+    a, b = _random_claims(rng, 8, ka, tight[0]), _random_claims(rng, 7, kb, tight[1])
+    i, j = rng.integers(0, 8, 60), rng.integers(0, 7, 60)
+    got = claims_conflict(a, i, b, j, "timed")
+    assert np.array_equal(got, _ref_timed(a, i, b, j, GEOMETRY_TOL))
+    assert np.array_equal(claims_conflict(b, j, a, i, "timed"), got)  # symmetric
+
+
+def test_timed_check_sees_both_answers():
+    """The random claims above are not all hits or all misses (the comparison would prove little)."""
+    rng = np.random.default_rng(3)
+    a, b = _random_claims(rng, 8, 4, False), _random_claims(rng, 7, 3, False)
+    i, j = rng.integers(0, 8, 200), rng.integers(0, 7, 200)
+    got = claims_conflict(a, i, b, j, "timed")
+    assert 0 < got.sum() < len(got)

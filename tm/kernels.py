@@ -1,0 +1,210 @@
+"""Compiled loops of the traffic manager's hot paths (numba), float for float the numpy formulas.
+
+The ``timed`` check of reach claims (:func:`tm.reach.claims_conflict`) compares, for each candidate
+pair, slot ``k`` of one claim with slot ``k`` of the other: a world bounding-box pre-filter, then
+the separating-axis test, stopping at the first slot that meets.  In numpy that is a gather of
+``pairs x K`` boxes and a second pass over the slots the first test left open; here it is one loop
+per pair that stops early (measured: ``benchmarks/bench_tm.py``, README).  The claims themselves
+(:func:`tm.reach.reach_claims`) are a dozen formulas per vehicle and slot; :func:`reach_boxes`
+evaluates them in one pass, with the slots' world bounding boxes, instead of a dozen passes over
+``(n, K)`` arrays.
+
+Every kernel performs the same floating-point operations, in the same order, as the numpy code it
+replaces (``tests/tm/test_kernels.py`` compares them bit for bit with those formulas): compiled
+without ``fastmath``, so no reassociation or fused multiply-add.  Trigonometry stays in numpy (the
+callers pass ``cos``/``sin`` of the headings): the library's and numpy's ``cos`` need not agree in
+the last bit.  ``max``/``min`` below are numpy's ``maximum``/``minimum`` for numbers (the first
+argument on ties, as numpy).  Compiled on first use and cached beside this file
+(``cache=True``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+__all__ = ["timed_pairs_plain", "timed_pairs_tight", "reach_boxes"]
+
+
+@njit(cache=True, inline="always")
+def _max(a, b):
+    return a if a >= b else b
+
+
+@njit(cache=True, inline="always")
+def _min(a, b):
+    return a if a <= b else b
+
+
+@njit(cache=True, inline="always")
+def _sat(acx, acy, ac, as_, alo0, alo1, ahi0, ahi1, bcx, bcy, bc, bs, blo0, blo1, bhi0, bhi1, tol):
+    """:func:`tm.reach._boxes_overlap` of one pair of boxes ``c + R [lo, hi]`` (``ac, as_``: cos, sin
+    of the first box's heading)."""
+    if not (alo0 <= ahi0 and alo1 <= ahi1 and blo0 <= bhi0 and blo1 <= bhi1):
+        return False
+    mx = 0.5 * (alo0 + ahi0)
+    my = 0.5 * (alo1 + ahi1)
+    ax = acx + ac * mx - as_ * my
+    ay = acy + as_ * mx + ac * my
+    ahx = 0.5 * (ahi0 - alo0)
+    ahy = 0.5 * (ahi1 - alo1)
+    mx = 0.5 * (blo0 + bhi0)
+    my = 0.5 * (blo1 + bhi1)
+    bx = bcx + bc * mx - bs * my
+    by = bcy + bs * mx + bc * my
+    bhx = 0.5 * (bhi0 - blo0)
+    bhy = 0.5 * (bhi1 - blo1)
+    dx = bx - ax
+    dy = by - ay
+    cc = abs(ac * bc + as_ * bs)
+    ss = abs(ac * bs - as_ * bc)
+    if abs(dx * ac + dy * as_) - (ahx + bhx * cc + bhy * ss) > tol:
+        return False
+    if abs(-dx * as_ + dy * ac) - (ahy + bhx * ss + bhy * cc) > tol:
+        return False
+    if abs(dx * bc + dy * bs) - (bhx + ahx * cc + ahy * ss) > tol:
+        return False
+    if abs(-dx * bs + dy * bc) - (bhy + ahx * ss + ahy * cc) > tol:
+        return False
+    return True
+
+
+@njit(cache=True, inline="always")
+def _aabb_meet(A, p, ka, B, q, kb, pad):
+    return (A[0, p, ka] <= B[1, q, kb] + pad and B[0, q, kb] <= A[1, p, ka] + pad and
+            A[2, p, ka] <= B[3, q, kb] + pad and B[2, q, kb] <= A[3, p, ka] + pad)
+
+
+@njit(cache=True)
+def timed_pairs_plain(A, B, ca, cos_a, sin_a, lo_a, hi_a, cb, cos_b, sin_b, lo_b, hi_b, i, j, tol, pad):
+    """Whether claims ``a[i[t]]`` and ``b[j[t]]`` meet at some slot (``timed`` check), one box per
+    slot.  ``A``, ``B``: the slots' world bounding boxes ``(4, n, K)`` (the pre-filter, compared
+    with ``pad``); ``ca``, ``cos_a``, ``sin_a``, ``lo_a``, ``hi_a``: centres, headings' cos and sin,
+    segment-frame corners ``(n, K, 2)``; slots past a shorter horizon are its last one."""
+    n = len(i)
+    out = np.zeros(n, dtype=np.bool_)
+    KA, KB = A.shape[2], B.shape[2]
+    La, Lb = lo_a.shape[1], lo_b.shape[1]
+    K = max(KA, KB)
+    for t in range(n):
+        p, q = i[t], j[t]
+        for k in range(K):
+            if not _aabb_meet(A, p, min(k, KA - 1), B, q, min(k, KB - 1), pad):
+                continue
+            ka, kb = min(k, La - 1), min(k, Lb - 1)
+            if _sat(ca[p, 0], ca[p, 1], cos_a[p], sin_a[p], lo_a[p, ka, 0], lo_a[p, ka, 1], hi_a[p, ka, 0],
+                    hi_a[p, ka, 1], cb[q, 0], cb[q, 1], cos_b[q], sin_b[q], lo_b[q, kb, 0], lo_b[q, kb, 1],
+                    hi_b[q, kb, 0], hi_b[q, kb, 1], tol):
+                out[t] = True
+                break
+    return out
+
+
+@njit(cache=True)
+def timed_pairs_tight(A, B, La, ca, cos_a, sin_a, half_a, start_a, count_a, Lb, cb, cos_b, sin_b, half_b, start_b,
+                      count_b, i, j, tol, pad):
+    """:func:`timed_pairs_plain` for slots that are unions of boxes (:class:`tm.slot_boxes.SlotBoxes`:
+    flat boxes ``c + R [-half, half]``, each row's slot ``k`` the boxes ``start .. start + count - 1``);
+    two slots meet when some box of one meets some box of the other.  ``La``, ``Lb``: the claims'
+    own slot counts (the index into ``start``/``count`` is clipped to them)."""
+    n = len(i)
+    out = np.zeros(n, dtype=np.bool_)
+    KA, KB = A.shape[2], B.shape[2]
+    K = max(KA, KB)
+    for t in range(n):
+        p, q = i[t], j[t]
+        for k in range(K):
+            if not _aabb_meet(A, p, min(k, KA - 1), B, q, min(k, KB - 1), pad):
+                continue
+            ka, kb = min(k, La - 1), min(k, Lb - 1)
+            s0, n0, s1, n1 = start_a[p, ka], count_a[p, ka], start_b[q, kb], count_b[q, kb]
+            hit = False
+            for x in range(s0, s0 + n0):
+                for y in range(s1, s1 + n1):
+                    if _sat(ca[x, 0], ca[x, 1], cos_a[x], sin_a[x], -half_a[x, 0], -half_a[x, 1], half_a[x, 0],
+                            half_a[x, 1], cb[y, 0], cb[y, 1], cos_b[y], sin_b[y], -half_b[y, 0], -half_b[y, 1],
+                            half_b[y, 0], half_b[y, 1], tol):
+                        hit = True
+                        break
+                if hit:
+                    break
+            if hit:
+                out[t] = True
+                break
+    return out
+
+
+@njit(cache=True)
+def _table(T, m, w, w0, dw, up):
+    """``T[m, j]`` at the grid point at or below (``up`` False: at or above) ``w``, clipped to the
+    grid (:meth:`controllers.authority.AuthorityTables.g` / ``h``)."""
+    x = (w - w0) / dw
+    f = np.floor(x) if up else np.ceil(x)
+    f = _min(_max(f, 0.0), T.shape[1] - 1.0)
+    return T[m, int(f)]
+
+
+@njit(cache=True)
+def reach_boxes(E, index, ly, Aa, Ac, ra, ry, v_lo_t, v_hi_t, p_lo_t, p_hi_t, y_lo_t, y_hi_t, G, H, w0, dw,
+                margin, fx_lo, fx_hi, fy_lo, fy_hi, K, centre, cos_h, sin_h, with_boxes):
+    """The claim boxes of :func:`tm.reach.reach_claims`: ``P`` (4, n, K) (along lo, hi, across lo,
+    hi in the segment frame, footprint added, empty slots ``+inf, -inf``) and, with ``with_boxes``,
+    their world bounding boxes ``(4, n, K)`` (:func:`tm.reach.slot_aabb`).
+
+    ``E`` (n, 4): segment-frame errors; ``index`` (n,); ``ly`` (n,): the across factor's level plus
+    one, at most ``index`` (or ``index`` itself without an across factor); ``Aa``, ``Ac`` (K-1, 2, 2),
+    ``ra``, ``ry`` (K-1, 2): ``A^k`` and ``r_k`` for ``k = 1 .. K-1``; the tables of
+    :class:`controllers.authority.AuthorityTables`; footprint half extents (n,) per side."""
+    n = E.shape[0]
+    P = np.empty((4, n, K))
+    W = np.empty((4, n, K)) if with_boxes else np.empty((4, 0, K))
+    inf = np.inf
+    for v in range(n):
+        e0, e1, e2, e3 = E[v, 0], E[v, 1], E[v, 2], E[v, 3]
+        for s in range(K):
+            if s < K - 1:
+                k = s + 1
+                mm = _max(index[v] - k, 0)
+                my = _max(ly[v] - k, 0)
+                cp = e0 * Aa[s, 0, 0] + e2 * Aa[s, 0, 1]
+                cv = e0 * Aa[s, 1, 0] + e2 * Aa[s, 1, 1]
+                cy = e1 * Ac[s, 0, 0] + e3 * Ac[s, 0, 1]
+                vl = _max(cv - ra[s, 1], v_lo_t[mm])
+                vh = _min(cv + ra[s, 1], v_hi_t[mm])
+                a0 = _max(_max(cp - ra[s, 0], _table(H, mm, vh + margin, w0, dw, False)), p_lo_t[mm])
+                a1 = _min(_min(cp + ra[s, 0], _table(G, mm, vl - margin, w0, dw, True)), p_hi_t[mm])
+                a2 = _max(cy - ry[s, 0], y_lo_t[my])
+                a3 = _min(cy + ry[s, 0], y_hi_t[my])
+            else:  # the last slot: T^0 whole
+                a0, a1, a2, a3 = p_lo_t[0], p_hi_t[0], y_lo_t[0], y_hi_t[0]
+            empty = a0 > a1 or a2 > a3
+            if empty:
+                a0, a1, a2, a3 = inf, -inf, inf, -inf
+            else:
+                a0 = a0 - fx_lo[v]
+                a1 = a1 + fx_hi[v]
+                a2 = a2 - fy_lo[v]
+                a3 = a3 + fy_hi[v]
+            P[0, v, s], P[1, v, s], P[2, v, s], P[3, v, s] = a0, a1, a2, a3
+            if with_boxes:
+                if empty:
+                    W[0, v, s], W[1, v, s], W[2, v, s], W[3, v, s] = inf, -inf, inf, -inf
+                    continue
+                c, sn = cos_h[v], sin_h[v]
+                ac, as_ = abs(c), abs(sn)
+                mx = (a0 + a1) * 0.5
+                my_ = (a2 + a3) * 0.5
+                hx = (a1 - a0) * 0.5
+                hy = (a3 - a2) * 0.5
+                if not (hx >= 0 and hy >= 0):
+                    W[0, v, s], W[1, v, s], W[2, v, s], W[3, v, s] = inf, -inf, inf, -inf
+                    continue
+                wx = c * mx - sn * my_ + centre[v, 0]
+                wy = sn * mx + c * my_ + centre[v, 1]
+                ex = ac * hx + as_ * hy
+                ey = as_ * hx + ac * hy
+                W[0, v, s] = wx - ex
+                W[1, v, s] = wx + ex
+                W[2, v, s] = wy - ey
+                W[3, v, s] = wy + ey
+    return P, W
