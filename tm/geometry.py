@@ -30,6 +30,7 @@ import numpy as np
 from scipy.optimize import linprog
 
 from controllers.tolerances import GEOMETRY_TOL
+from tm.kernels import grid_pairs
 
 __all__ = [
     "rectangles", "minkowski_sum", "aabb", "edge_normals", "is_convex_ccw", "convex_hull",
@@ -173,34 +174,24 @@ def convex_hull(points) -> np.ndarray:
 
 
 # ----------------------------------------------------------------------------- broad phase
-def _pair_ranges(starts: np.ndarray, counts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """All ``(p, q)`` with ``q`` in ``starts[p] .. starts[p] + counts[p] - 1``, vectorised."""
-    total = int(counts.sum())
-    p = np.repeat(np.arange(len(counts)), counts)
-    q = np.repeat(starts - np.cumsum(counts) + counts, counts) + np.arange(total)
-    return p, q
-
-
-def broad_phase(lo, hi, tol: float = GEOMETRY_TOL, mask=None, cell: float | None = None):
-    """Pairs of overlapping axis-aligned boxes, by a uniform grid.
+def broad_phase(lo, hi, tol: float = GEOMETRY_TOL, mask=None):
+    """Pairs of overlapping axis-aligned boxes, by a uniform grid (:func:`tm.kernels.grid_pairs`).
 
     Every box is entered in the grid cells it covers; pairs are formed within
     each cell and kept only in the cell that holds the corner
     ``max(lo_i, lo_j)`` of their intersection, so each overlapping pair is
     reported once.  Cost is ``O(n log n)`` plus the number of pairs sharing a
-    cell (with ``mask``: pairs sharing a cell with a masked box).
+    cell.  Cell size: the median box extent, doubled while the boxes would
+    cover more than ``8 n`` cells in total.
 
     Parameters
     ----------
     lo, hi : array_like, shape (n, 2)
-        Box corners.
+        Box corners (``lo <= hi``).
     tol : float
         Boxes closer than ``tol`` count as overlapping.
     mask : array_like of bool, shape (n,), optional
         Keep only pairs with at least one box in ``mask``.
-    cell : float, optional
-        Cell size (default: the median box extent, doubled while the boxes
-        would cover more than ``8 n`` cells in total).
 
     Returns
     -------
@@ -213,68 +204,13 @@ def broad_phase(lo, hi, tol: float = GEOMETRY_TOL, mask=None, cell: float | None
     if n < 2:
         return _EMPTY_PAIRS
     if mask is not None:
-        mask = np.asarray(mask, dtype=bool)
+        mask = np.ascontiguousarray(mask, dtype=bool)
         if not mask.any():
             return _EMPTY_PAIRS
-    # contiguous 1-D coordinates: reductions over (n, 2) along axis 0 are slow
+    # contiguous 1-D coordinates, grown by tol / 2 each side
     x0, y0 = lo[:, 0] - 0.5 * tol, lo[:, 1] - 0.5 * tol
     x1, y1 = hi[:, 0] + 0.5 * tol, hi[:, 1] + 0.5 * tol
-    ox, oy = x0.min(), y0.min()
-    if cell is not None:
-        h = float(cell)
-    else:
-        ext = np.maximum(x1 - x0, y1 - y0)
-        h = max(float(np.partition(ext, n // 2)[n // 2]), 1e-6)      # (upper) median extent
-    span = max(x1.max() - ox, y1.max() - oy)
-    while True:
-        inv = 1.0 / h                    # one cell formula for boxes and corners: floor((v - o) * inv)
-        cx0 = np.floor((x0 - ox) * inv).astype(np.int64)
-        cy0 = np.floor((y0 - oy) * inv).astype(np.int64)
-        nx = np.floor((x1 - ox) * inv).astype(np.int64) - cx0 + 1
-        ny = np.floor((y1 - oy) * inv).astype(np.int64) - cy0 + 1
-        cnt = nx * ny
-        total = int(cnt.sum())
-        if cell is not None or total <= 8 * n or h > span:
-            break
-        h *= 2.0
-    width = int((cy0 + ny).max()) + 1
-    if total == n:                                   # every box in one cell
-        box = np.arange(n)
-        key = cx0 * width + cy0
-    else:
-        box, local = _pair_ranges(np.zeros(n, dtype=np.int64), cnt)
-        nxb = nx[box]
-        key = (cx0[box] + local % nxb) * width + cy0[box] + local // nxb
-    m = len(key)
-    if int(key.max()) < (1 << 62) // m:              # sort packed (key, entry): much faster than argsort
-        packed = np.sort(key * m + np.arange(m))
-        key, box = packed // m, box[packed % m]
-    else:
-        order = np.argsort(key)
-        key, box = key[order], box[order]
-    bounds = np.flatnonzero(key[1:] != key[:-1]) + 1
-    sizes = np.diff(np.concatenate(([0], bounds, [m])))
-    group_end = np.repeat(np.concatenate((bounds, [m])), sizes)
-    if mask is None:
-        p, q = _pair_ranges(np.arange(1, m + 1), group_end - np.arange(m) - 1)
-    else:                                            # pairs (masked entry, any other entry of its cell)
-        group_start = group_end - np.repeat(sizes, sizes)
-        src = np.flatnonzero(mask[box])
-        p, q = _pair_ranges(group_start[src], group_end[src] - group_start[src])
-        p = src[p]
-        keep = (p != q) & (~mask[box[q]] | (p < q))   # a masked-masked pair once
-        p, q = p[keep], q[keep]
-    bi, bj = box[p], box[q]
-    keep = bi != bj
-    bi, bj, cell_key = bi[keep], bj[keep], key[p[keep]]
-    cx = np.maximum(x0[bi], x0[bj])
-    cy = np.maximum(y0[bi], y0[bj])
-    owner = np.floor((cx - ox) * inv).astype(np.int64) * width + np.floor((cy - oy) * inv).astype(np.int64)
-    keep = owner == cell_key
-    keep &= (np.minimum(x1[bi], x1[bj]) >= cx) & (np.minimum(y1[bi], y1[bj]) >= cy)
-    bi, bj = bi[keep], bj[keep]
-    i, j = np.minimum(bi, bj), np.maximum(bi, bj)
-    packed = np.sort(i * n + j, kind="stable")                   # sorted by (i, j): one int sort, not lexsort
+    packed = grid_pairs(x0, x1, y0, y1, mask if mask is not None else np.zeros(0, dtype=bool), mask is not None)
     return packed // n, packed % n
 
 

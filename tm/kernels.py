@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["timed_pairs_plain", "timed_pairs_tight", "reach_boxes"]
+__all__ = ["timed_pairs_plain", "timed_pairs_tight", "reach_boxes", "grid_pairs"]
 
 
 @njit(cache=True, inline="always")
@@ -208,3 +208,81 @@ def reach_boxes(E, index, ly, Aa, Ac, ra, ry, v_lo_t, v_hi_t, p_lo_t, p_hi_t, y_
                 W[2, v, s] = wy - ey
                 W[3, v, s] = wy + ey
     return P, W
+
+
+@njit(cache=True)
+def grid_pairs(x0, x1, y0, y1, mask, use_mask):
+    """Pairs ``(i, j)``, ``i < j``, of boxes ``[x0, x1] x [y0, y1]`` that meet (closed boxes:
+    ``min(x1) >= max(x0)`` on both axes), at least one of them in ``mask`` when ``use_mask``;
+    as packed keys ``i n + j``, sorted.  A uniform grid: cell size the (upper) median box extent,
+    doubled while the boxes would cover more than ``8 n`` cells; every box is entered in the cells
+    it covers, pairs are formed within each cell and kept only in the cell holding the corner
+    ``max(lo_i, lo_j)`` of their intersection, so each is reported once.  Boxes must not be
+    inverted (``x1 >= x0``, ``y1 >= y0``)."""
+    n = len(x0)
+    ox, oy = x0.min(), y0.min()
+    ext = np.maximum(x1 - x0, y1 - y0)
+    h = max(np.sort(ext)[n // 2], 1e-6)
+    span = max(x1.max() - ox, y1.max() - oy)
+    cx0 = np.empty(n, dtype=np.int64)
+    cy0 = np.empty(n, dtype=np.int64)
+    nx = np.empty(n, dtype=np.int64)
+    ny = np.empty(n, dtype=np.int64)
+    while True:
+        inv = 1.0 / h
+        total = 0
+        for b in range(n):
+            cx0[b] = np.int64(np.floor((x0[b] - ox) * inv))
+            cy0[b] = np.int64(np.floor((y0[b] - oy) * inv))
+            nx[b] = np.int64(np.floor((x1[b] - ox) * inv)) - cx0[b] + 1
+            ny[b] = np.int64(np.floor((y1[b] - oy) * inv)) - cy0[b] + 1
+            total += nx[b] * ny[b]
+        if total <= 8 * n or h > span:
+            break
+        h *= 2.0
+    width = 0
+    for b in range(n):
+        width = max(width, cy0[b] + ny[b])
+    width += 1
+    cell = np.empty(total, dtype=np.int64)
+    box = np.empty(total, dtype=np.int64)
+    e = 0
+    for b in range(n):
+        for u in range(nx[b]):
+            for w in range(ny[b]):
+                cell[e] = (cx0[b] + u) * width + cy0[b] + w
+                box[e] = b
+                e += 1
+    if cell.max() < (1 << 62) // total:  # sort packed (cell, entry): much faster than argsort
+        order = np.sort(cell * total + np.arange(total)) % total
+    else:
+        order = np.argsort(cell, kind="mergesort")
+    cap = max(16, 4 * n)
+    key = np.empty(cap, dtype=np.int64)
+    m = 0
+    g = 0
+    while g < total:
+        c = cell[order[g]]
+        end = g + 1
+        while end < total and cell[order[end]] == c:
+            end += 1
+        for a in range(g, end):
+            p = box[order[a]]
+            for b in range(a + 1, end):
+                q = box[order[b]]
+                if use_mask and not (mask[p] or mask[q]):
+                    continue
+                cx = max(x0[p], x0[q])
+                cy = max(y0[p], y0[q])
+                if not (min(x1[p], x1[q]) >= cx and min(y1[p], y1[q]) >= cy):
+                    continue
+                if np.int64(np.floor((cx - ox) * inv)) * width + np.int64(np.floor((cy - oy) * inv)) != c:
+                    continue
+                if m == cap:
+                    grown = np.empty(2 * cap, dtype=np.int64)
+                    grown[:cap] = key
+                    key, cap = grown, 2 * cap
+                key[m] = min(p, q) * n + max(p, q)
+                m += 1
+        g = end
+    return np.sort(key[:m])
