@@ -22,10 +22,12 @@ An infeasible QP inside the domain of attraction is a bug, never hidden:
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
 from controllers import tolerances as tol
+from controllers.membership_kernel import PolarStack
 from controllers.settings import ControllerSettings
 from controllers.synthesis import SetFamily, rotate_pairs
 
@@ -166,7 +168,13 @@ class FactorMembership:
         """``min{l : e_f ∈ T_f^l}`` per row of the full error ``E`` (V, n); ``N + 1`` outside."""
         Ef = np.asarray(E, dtype=float)[:, self.states]
         steps = max(1, int(np.ceil(np.log2(self.N + 2))))
+        if self._stack is not None:  # sector tables: the search in one compiled loop
+            return self._stack.index([(Ef[:, 0], Ef[:, 1])], self.N, steps)
         return _nested_index(lambda lev: _factor_inside(self, Ef, lev), Ef.shape[0], self.N, steps)
+
+    @cached_property
+    def _stack(self) -> PolarStack | None:
+        return None if self.polar is None else PolarStack([self.polar])
 
 
 def _factor_inside(t, Ef: np.ndarray, lev: np.ndarray) -> np.ndarray:
@@ -227,6 +235,10 @@ class STMPC:
                 Ht=[P.A for P in f.tilde], ht=[P.b for P in f.tilde], HtB=HtB, HtA=HtA,
                 Hp=Hp, hp=hp, gp=gp, HtAp=HtAp, htp=htp, polar=_Polar.build(f.levels)))
         self._steps = max(1, int(np.ceil(np.log2(self.N + 2))))
+        # sector tables of the 2-D factors for the compiled index search (controllers.membership_kernel)
+        self._factor_stacks = [None if t.polar is None else PolarStack([t.polar]) for t in self._tables]
+        self._stack = PolarStack([t.polar for t in self._tables]) \
+            if all(t.polar is not None for t in self._tables) else None
         self._daqp = None
         self.authority = family.authority
         if self.settings.mode == "authority" and self.authority is None:
@@ -277,6 +289,9 @@ class STMPC:
             ``N + 1`` marks a state outside the domain of attraction.
         """
         E = self.error(X, centres, heading)
+        if self._stack is not None:  # every factor has sector tables: the search in one compiled loop
+            return self._stack.index([(E[:, t.states[0]], E[:, t.states[1]]) for t in self._tables], self.N,
+                                     self._steps)
         return _nested_index(lambda lev: self._inside(E, lev), E.shape[0], self.N, self._steps)
 
     def factor_index(self, E: np.ndarray, factor: int) -> np.ndarray:
@@ -285,6 +300,8 @@ class STMPC:
         (the joint index is the largest over the factors)."""
         t = self._tables[factor]
         Ef = np.asarray(E, dtype=float)[:, t.states]
+        if t.polar is not None:
+            return self._factor_stacks[factor].index([(Ef[:, 0], Ef[:, 1])], self.N, self._steps)
         return _nested_index(lambda lev: _factor_inside(t, Ef, lev), Ef.shape[0], self.N, self._steps)
 
     def _inside(self, E: np.ndarray, lev: np.ndarray) -> np.ndarray:

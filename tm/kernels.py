@@ -146,22 +146,24 @@ def _table(T, m, w, w0, dw, up):
 
 @njit(cache=True)
 def reach_boxes(E, index, ly, Aa, Ac, ra, ry, v_lo_t, v_hi_t, p_lo_t, p_hi_t, y_lo_t, y_hi_t, G, H, w0, dw,
-                margin, fx_lo, fx_hi, fy_lo, fy_hi, K, centre, cos_h, sin_h, with_boxes):
-    """The claim boxes of :func:`tm.reach.reach_claims`: ``P`` (4, n, K) (along lo, hi, across lo,
-    hi in the segment frame, footprint added, empty slots ``+inf, -inf``) and, with ``with_boxes``,
-    their world bounding boxes ``(4, n, K)`` (:func:`tm.reach.slot_aabb`).
+                margin, fx_lo, fx_hi, fy_lo, fy_hi, K, centre, cos_h, sin_h, lo, hi, W, row0, with_boxes):
+    """The claim boxes of :func:`tm.reach.reach_claims`, written to rows ``row0 ..`` of ``lo``, ``hi``
+    (rows, K_out, 2) (along, across in the segment frame, footprint added, empty slots ``+inf,
+    -inf``) and, with ``with_boxes``, of ``W`` (4, rows, K_out): their world bounding boxes
+    (:func:`tm.reach.slot_aabb`).  Slots ``K - 1 ..`` are ``T^0`` whole (the last slot, repeated up
+    to ``K_out``: it stands for every later step).
 
     ``E`` (n, 4): segment-frame errors; ``index`` (n,); ``ly`` (n,): the across factor's level plus
     one, at most ``index`` (or ``index`` itself without an across factor); ``Aa``, ``Ac`` (K-1, 2, 2),
     ``ra``, ``ry`` (K-1, 2): ``A^k`` and ``r_k`` for ``k = 1 .. K-1``; the tables of
     :class:`controllers.authority.AuthorityTables`; footprint half extents (n,) per side."""
     n = E.shape[0]
-    P = np.empty((4, n, K))
-    W = np.empty((4, n, K)) if with_boxes else np.empty((4, 0, K))
+    K_out = lo.shape[1]
     inf = np.inf
     for v in range(n):
+        r = row0 + v
         e0, e1, e2, e3 = E[v, 0], E[v, 1], E[v, 2], E[v, 3]
-        for s in range(K):
+        for s in range(K_out):
             if s < K - 1:
                 k = s + 1
                 mm = _max(index[v] - k, 0)
@@ -185,29 +187,26 @@ def reach_boxes(E, index, ly, Aa, Ac, ra, ry, v_lo_t, v_hi_t, p_lo_t, p_hi_t, y_
                 a1 = a1 + fx_hi[v]
                 a2 = a2 - fy_lo[v]
                 a3 = a3 + fy_hi[v]
-            P[0, v, s], P[1, v, s], P[2, v, s], P[3, v, s] = a0, a1, a2, a3
-            if with_boxes:
-                if empty:
-                    W[0, v, s], W[1, v, s], W[2, v, s], W[3, v, s] = inf, -inf, inf, -inf
-                    continue
-                c, sn = cos_h[v], sin_h[v]
-                ac, as_ = abs(c), abs(sn)
-                mx = (a0 + a1) * 0.5
-                my_ = (a2 + a3) * 0.5
-                hx = (a1 - a0) * 0.5
-                hy = (a3 - a2) * 0.5
-                if not (hx >= 0 and hy >= 0):
-                    W[0, v, s], W[1, v, s], W[2, v, s], W[3, v, s] = inf, -inf, inf, -inf
-                    continue
-                wx = c * mx - sn * my_ + centre[v, 0]
-                wy = sn * mx + c * my_ + centre[v, 1]
-                ex = ac * hx + as_ * hy
-                ey = as_ * hx + ac * hy
-                W[0, v, s] = wx - ex
-                W[1, v, s] = wx + ex
-                W[2, v, s] = wy - ey
-                W[3, v, s] = wy + ey
-    return P, W
+            lo[r, s, 0], lo[r, s, 1], hi[r, s, 0], hi[r, s, 1] = a0, a2, a1, a3
+            if not with_boxes:
+                continue
+            hx = (a1 - a0) * 0.5
+            hy = (a3 - a2) * 0.5
+            if empty or not (hx >= 0 and hy >= 0):
+                W[0, r, s], W[1, r, s], W[2, r, s], W[3, r, s] = inf, -inf, inf, -inf
+                continue
+            c, sn = cos_h[v], sin_h[v]
+            ac, as_ = abs(c), abs(sn)
+            mx = (a0 + a1) * 0.5
+            my_ = (a2 + a3) * 0.5
+            wx = c * mx - sn * my_ + centre[v, 0]
+            wy = sn * mx + c * my_ + centre[v, 1]
+            ex = ac * hx + as_ * hy
+            ey = as_ * hx + ac * hy
+            W[0, r, s] = wx - ex
+            W[1, r, s] = wx + ex
+            W[2, r, s] = wy - ey
+            W[3, r, s] = wy + ey
 
 
 @njit(cache=True)

@@ -52,7 +52,7 @@ from tm.kernels import reach_boxes, timed_pairs_plain, timed_pairs_tight
 from tm.slot_boxes import SlotBoxes
 
 __all__ = ["ReachModel", "ReachClaims", "reach_claims", "claims_conflict", "pairwise_conflicts", "world_aabb",
-           "candidate_pairs", "pad_slots", "split_pad", "slot_aabb", "union_aabb", "PREFILTER_TOL_FACTOR"]
+           "candidate_pairs", "pad_slots", "reach_claims_many", "split_pad", "slot_aabb", "union_aabb", "PREFILTER_TOL_FACTOR"]
 
 #: The per-slot world bounding boxes that pre-filter the ``timed`` check are compared with
 #: ``PREFILTER_TOL_FACTOR * tol``: two oriented boxes that the separating-axis test with ``tol``
@@ -263,10 +263,37 @@ def reach_claims(rm: ReachModel, X: np.ndarray, centre: np.ndarray, heading: np.
         planar arrays at hand; False where the boxes are not wanted (path-frame claims are drawn
         from these boxes of path coordinates, :mod:`tm.path_claims`), else computed on first use.
     """
+    return reach_claims_many([(rm, X, centre, heading, index, body_offset, body_pad)], boxes)
+
+
+def reach_claims_many(groups, boxes: bool = True) -> ReachClaims:
+    """:func:`reach_claims` of several groups ``(rm, X, centre, heading, index, body_offset,
+    body_pad)``, concatenated in order (as :meth:`ReachClaims.concat`: the longer horizon over the
+    groups, shorter ones padded with their last slot), written in place: one set of arrays."""
+    ins = [_reach_inputs(*g) for g in groups]
+    n = sum(len(centre) for _, centre, _ in ins)
+    K_out = max((g[0].K for g in groups), default=1)
+    lo, hi = np.empty((n, K_out, 2)), np.empty((n, K_out, 2))
+    W = np.empty((4, n if boxes else 0, K_out))
+    row0 = 0
+    for args, centre, _ in ins:
+        reach_boxes(*args, lo, hi, W, row0, boxes)
+        row0 += len(centre)
+    if len(ins) == 1:
+        centre, heading = ins[0][1], ins[0][2]
+    else:
+        centre, heading = np.concatenate([i[1] for i in ins]), np.concatenate([i[2] for i in ins])
+    out = ReachClaims(centre, heading, lo, hi)
+    return out._with_boxes(W) if boxes else out
+
+
+def _reach_inputs(rm: ReachModel, X, centre, heading, index, body_offset=0.0, body_pad=None) -> tuple:
+    """``(args, centre, heading)``: the arguments of :func:`tm.kernels.reach_boxes` for one group
+    (validated), up to ``sin_h``, and the group's waypoints and headings as arrays."""
     X = np.asarray(X, dtype=float)
-    centre = np.asarray(centre, dtype=float)
-    heading = np.asarray(heading, dtype=float)
-    index = np.asarray(index, dtype=np.intp)
+    centre = np.ascontiguousarray(centre, dtype=float)
+    heading = np.ascontiguousarray(heading, dtype=float)
+    index = np.ascontiguousarray(index, dtype=np.intp)
     n, K, T = len(X), rm.K, rm.tables
     if np.any(index > rm.N) or np.any(index < 0):
         raise ValueError(f"reach_claims: index must lie in 0 .. N = {rm.N}, got {index.min()} .. {index.max()}")
@@ -284,13 +311,10 @@ def reach_claims(rm: ReachModel, X: np.ndarray, centre: np.ndarray, heading: np.
     # per slot k = 1 .. K-1: the reach's intervals (centre A^k e, radius r_k per factor) cut to
     # T^{max(l-k, 0)}'s, the tables read just outside the velocity bounds (REACH_LOOKUP_MARGIN:
     # ties at grid points); the last slot T^0 whole; then the footprint (tm.kernels.reach_boxes)
-    P, W = reach_boxes(E, np.ascontiguousarray(index), np.ascontiguousarray(ly, dtype=np.intp), rm.Ak_al[1:], rm.Ak_ac[1:], rm.r_al[1:],
-                       rm.r_ac[1:], T.v_lo, T.v_hi, T.p_lo, T.p_hi, T.y_lo, T.y_hi, T.G, T.H, float(T.w0),
-                       float(T.dw), REACH_LOOKUP_MARGIN, *(np.ascontiguousarray(f, dtype=float)
-                                                          for f in (fx_lo, fx_hi, fy_lo, fy_hi)),
-                       K, np.ascontiguousarray(centre), np.cos(heading), np.sin(heading), boxes)
-    out = ReachClaims(centre, heading, np.stack([P[0], P[2]], axis=-1), np.stack([P[1], P[3]], axis=-1))
-    return out._with_boxes(W) if boxes else out
+    feet = tuple(np.ascontiguousarray(f, dtype=float) for f in (fx_lo, fx_hi, fy_lo, fy_hi))
+    return (E, index, np.ascontiguousarray(ly, dtype=np.intp), rm.Ak_al[1:], rm.Ak_ac[1:], rm.r_al[1:], rm.r_ac[1:],
+            T.v_lo, T.v_hi, T.p_lo, T.p_hi, T.y_lo, T.y_hi, T.G, T.H, float(T.w0), float(T.dw), REACH_LOOKUP_MARGIN,
+            *feet, K, centre, np.cos(heading), np.sin(heading)), centre, heading
 
 
 def split_pad(pad, n: int) -> tuple[np.ndarray, np.ndarray]:

@@ -16,7 +16,8 @@ from controllers.authority import build_tables
 from controllers.synthesis import SetFamily, rotate_pairs
 from controllers.tolerances import GEOMETRY_TOL
 from tm.path_claims import PathPlace, bare_model, path_reach_claims
-from tm.reach import ReachClaims, ReachModel, candidate_pairs, claims_conflict, reach_claims, split_pad, world_aabb
+from tm.reach import (ReachClaims, ReachModel, candidate_pairs, claims_conflict, reach_claims, reach_claims_many,
+                      split_pad, world_aabb)
 
 __all__ = ["ReachBook", "tube_escapes", "footprint_claims", "admit_reach"]
 
@@ -60,13 +61,15 @@ class ReachBook:
         place]])``, concatenated (shorter horizons padded with their last slot); an empty claim set
         when every group is empty.  ``pad``: the footprint's extra half extents (``reach_claims``'
         ``body_pad``); ``place``: a :class:`~tm.path_claims.PathPlace` for path-frame vehicles."""
-        out = [self.claims_of(p[0], p[1], p[2], p[3], p[4], p[5] if len(p) > 5 else None,
-                              p[6] if len(p) > 6 else None)
-               for p in parts if len(p[1])]
-        if not out:
+        parts = [p for p in parts if len(p[1])]
+        if not parts:
             K = self.K
             return ReachClaims(np.zeros((0, 2)), np.zeros(0), np.zeros((0, K, 2)), np.zeros((0, K, 2)))
-        return ReachClaims.concat(*out)
+        if all(len(p) <= 6 or p[6] is None for p in parts):  # road frame: one set of arrays, written in place
+            return reach_claims_many([(self.models[p[0]], p[1], p[2], p[3], np.minimum(p[4], self.models[p[0]].N),
+                                       0.0, p[5] if len(p) > 5 else None) for p in parts])
+        return ReachClaims.concat(*(self.claims_of(p[0], p[1], p[2], p[3], p[4], p[5] if len(p) > 5 else None,
+                                                   p[6] if len(p) > 6 else None) for p in parts))
 
 
 def footprint_claims(position, heading, length, width, K: int = 1, pad=None) -> ReachClaims:

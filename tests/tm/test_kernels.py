@@ -16,7 +16,7 @@ from controllers.settings import SynthesisSettings
 from controllers.synthesis import rotate_pairs
 from controllers.tolerances import GEOMETRY_TOL, REACH_LOOKUP_MARGIN
 from tm.lane import lane_class
-from tm.reach import (PREFILTER_TOL_FACTOR, ReachClaims, ReachModel, _boxes_overlap, claims_conflict, reach_claims,
+from tm.reach import (PREFILTER_TOL_FACTOR, ReachClaims, _boxes_overlap, claims_conflict, reach_claims,
                       slot_aabb, split_pad)
 from tm.slot_boxes import SlotBoxes
 
@@ -157,3 +157,29 @@ def test_timed_check_sees_both_answers():
     i, j = rng.integers(0, 8, 200), rng.integers(0, 7, 200)
     got = claims_conflict(a, i, b, j, "timed")
     assert 0 < got.sum() < len(got)
+
+
+@pytest.fixture(scope="module")
+def bus_model(shared_set_cache):
+    return lane_class(get_class("bus"), SynthesisSettings(cache_dir=shared_set_cache)).reach
+
+
+def test_claims_of_several_classes_written_in_place_equal_their_concatenation(car_model, bus_model):
+    """:func:`tm.reach.reach_claims_many` (one set of arrays, the longer horizon) equals the classes'
+    own claims concatenated with :meth:`ReachClaims.concat` (the shorter horizon padded with its
+    last slot), boxes included."""
+    from tm.reach import reach_claims_many
+
+    assert car_model.K != bus_model.K  # the padding is exercised
+    rng = np.random.default_rng(5)
+    groups = []
+    for rm, n in ((car_model, 7), (bus_model, 4), (car_model, 3)):
+        centre, heading = rng.uniform(-40, 40, (n, 2)), rng.uniform(-np.pi, np.pi, n)
+        E = np.column_stack([rng.uniform(-20, 2, n), rng.uniform(-0.5, 0.5, n), rng.uniform(0, 12, n),
+                             rng.uniform(-0.3, 0.3, n)])
+        X = np.hstack([centre, np.zeros((n, 2))]) + rotate_pairs(E, heading)
+        groups.append((rm, X, centre, heading, rng.integers(0, rm.N + 1, n), 0.0, rng.uniform(0, 1, (n, 4))))
+    got = reach_claims_many(groups)
+    want = ReachClaims.concat(*(reach_claims(*g[:5], body_offset=g[5], body_pad=g[6]) for g in groups))
+    for name in ("centre", "heading", "lo", "hi", "slot_boxes"):
+        assert np.array_equal(getattr(got, name), getattr(want, name)), name
