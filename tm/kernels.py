@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["timed_pairs_plain", "timed_pairs_tight", "reach_boxes", "grid_pairs"]
+__all__ = ["timed_pairs_plain", "timed_pairs_tight", "reach_boxes", "grid_pairs", "union_bounds"]
 
 
 @njit(cache=True, inline="always")
@@ -285,3 +285,22 @@ def grid_pairs(x0, x1, y0, y1, mask, use_mask):
                 m += 1
         g = end
     return np.sort(key[:m])
+
+
+@njit(cache=True)
+def union_bounds(W):
+    """Per row of world slot boxes ``W`` (4, n, K) (``x_lo, x_hi, y_lo, y_hi``; empty slots
+    ``+inf, -inf``): the bounds over its slots, ``lo`` and ``hi`` (n, 2) (inverted when all are
+    empty) -- :func:`tm.reach.union_aabb`'s minima and maxima."""
+    n, K = W.shape[1], W.shape[2]
+    lo = np.empty((n, 2))
+    hi = np.empty((n, 2))
+    for i in range(n):
+        x0, x1, y0, y1 = W[0, i, 0], W[1, i, 0], W[2, i, 0], W[3, i, 0]
+        for k in range(1, K):
+            x0 = _min(x0, W[0, i, k])
+            x1 = _max(x1, W[1, i, k])
+            y0 = _min(y0, W[2, i, k])
+            y1 = _max(y1, W[3, i, k])
+        lo[i, 0], lo[i, 1], hi[i, 0], hi[i, 1] = x0, y0, x1, y1
+    return lo, hi

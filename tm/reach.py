@@ -48,7 +48,7 @@ from controllers.stmpc import FactorMembership
 from controllers.synthesis import SetFamily, rotate_pairs
 from controllers.tolerances import GEOMETRY_TOL, REACH_LOOKUP_MARGIN
 from tm.geometry import broad_phase
-from tm.kernels import reach_boxes, timed_pairs_plain, timed_pairs_tight
+from tm.kernels import reach_boxes, timed_pairs_plain, timed_pairs_tight, union_bounds
 from tm.slot_boxes import SlotBoxes
 
 __all__ = ["ReachModel", "ReachClaims", "reach_claims", "claims_conflict", "pairwise_conflicts", "world_aabb",
@@ -465,7 +465,9 @@ def union_aabb(claims: ReachClaims) -> tuple[np.ndarray, np.ndarray]:
     """World bounding boxes (n, 2) of the union of every vehicle's slot boxes (inverted when all are
     empty): inside :func:`world_aabb`, enough for the ``timed`` check (a conflict is a slot overlap)."""
     b = claims.slot_boxes
-    return np.stack([b[0].min(axis=1), b[2].min(axis=1)], axis=1), np.stack([b[1].max(axis=1), b[3].max(axis=1)], axis=1)
+    if not b.shape[2]:
+        return np.full((b.shape[1], 2), np.inf), np.full((b.shape[1], 2), -np.inf)
+    return union_bounds(np.ascontiguousarray(b))
 
 
 def world_aabb(claims: ReachClaims) -> tuple[np.ndarray, np.ndarray]:

@@ -183,3 +183,18 @@ def test_claims_of_several_classes_written_in_place_equal_their_concatenation(ca
     want = ReachClaims.concat(*(reach_claims(*g[:5], body_offset=g[5], body_pad=g[6]) for g in groups))
     for name in ("centre", "heading", "lo", "hi", "slot_boxes"):
         assert np.array_equal(getattr(got, name), getattr(want, name)), name
+
+
+@settings(max_examples=30, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), tight=st.booleans())
+def test_union_boxes_are_the_slot_boxes_bounds(seed, tight):
+    """:func:`tm.reach.union_aabb` (compiled) equals numpy's minima and maxima over the slots, empty
+    slots and claims with no slot at all included (inverted)."""
+    from tm.reach import union_aabb
+
+    rng = np.random.default_rng(seed)
+    c = _random_claims(rng, 9, int(rng.integers(1, 6)), tight)
+    b = c.slot_boxes
+    lo, hi = union_aabb(c)
+    assert np.array_equal(lo, np.stack([b[0].min(axis=1), b[2].min(axis=1)], axis=1))
+    assert np.array_equal(hi, np.stack([b[1].max(axis=1), b[3].max(axis=1)], axis=1))
