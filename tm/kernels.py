@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["timed_pairs_plain", "timed_pairs_tight", "reach_boxes", "grid_pairs", "union_bounds"]
+__all__ = ["timed_pairs_plain", "timed_pairs_tight", "reach_boxes", "grid_pairs", "union_bounds", "slot_bounds"]
 
 
 @njit(cache=True, inline="always")
@@ -304,3 +304,28 @@ def union_bounds(W):
             y1 = _max(y1, W[3, i, k])
         lo[i, 0], lo[i, 1], hi[i, 0], hi[i, 1] = x0, y0, x1, y1
     return lo, hi
+
+
+@njit(cache=True)
+def slot_bounds(x0, x1, y0, y1, start, count):
+    """World bounding boxes ``(4, n, K)`` of slots that are unions of boxes (:meth:`tm.slot_boxes.
+    SlotBoxes.aabb`): ``x0 .. y1`` (q,) the boxes' own bounds, each slot the boxes ``start ..
+    start + count - 1``; empty slots inverted (``+inf, -inf``).  A slot with the same boxes as the one
+    before it copies that one's bounds."""
+    n, K = start.shape
+    out = np.empty((4, n, K))
+    inf = np.inf
+    for i in range(n):
+        for k in range(K):
+            if k > 0 and start[i, k] == start[i, k - 1] and count[i, k] == count[i, k - 1]:
+                for c in range(4):
+                    out[c, i, k] = out[c, i, k - 1]
+                continue
+            a0, a1, a2, a3 = inf, -inf, inf, -inf
+            for b in range(start[i, k], start[i, k] + count[i, k]):
+                a0 = _min(a0, x0[b])
+                a1 = _max(a1, x1[b])
+                a2 = _min(a2, y0[b])
+                a3 = _max(a3, y1[b])
+            out[0, i, k], out[1, i, k], out[2, i, k], out[3, i, k] = a0, a1, a2, a3
+    return out

@@ -19,6 +19,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from tm.kernels import slot_bounds
+
 __all__ = ["SlotBoxes"]
 
 
@@ -127,35 +129,17 @@ class SlotBoxes:
         ``T^0``'s, :func:`tm.path_claims.path_reach_claims`; a shifted last slot) is bounded once,
         at its first slot, and copied along the run."""
         n, K = self.start.shape
-        out = np.empty((4, n, K))
-        out[0] = out[2] = np.inf
-        out[1] = out[3] = -np.inf
         if not len(self.heading) or not n or not K:
-            return out
-        st, ct = self.start, self.count
-        new = np.ones((n, K), dtype=bool)  # the first slot of each run of slots with the same boxes
-        new[:, 1:] = (st[:, 1:] != st[:, :-1]) | (ct[:, 1:] != ct[:, :-1])
-        cnt = ct.ravel()
-        has = np.flatnonzero(new.ravel() & (cnt > 0))
-        if not len(has):
+            out = np.empty((4, n, K))
+            out[0] = out[2] = np.inf
+            out[1] = out[3] = -np.inf
             return out
         c, s = np.abs(np.cos(self.heading)), np.abs(np.sin(self.heading))
         ex = c * self.half[:, 0] + s * self.half[:, 1]
         ey = s * self.half[:, 0] + c * self.half[:, 1]
-        # each slot's boxes are one run [start, start + count): reduceat over the pairs (start, end)
-        # reduces exactly that run whatever the runs' order or overlap (shifted and padded slots
-        # share boxes); the odd pairs (end, next start) are ignored, a sentinel keeps ends in range
-        at = st.ravel()[has]
-        idx = np.empty(2 * len(has), dtype=np.intp)
-        idx[0::2], idx[1::2] = at, at + cnt[has]
-        for p, v, f in ((0, self.centre[:, 0] - ex, np.minimum), (1, self.centre[:, 0] + ex, np.maximum),
-                        (2, self.centre[:, 1] - ey, np.minimum), (3, self.centre[:, 1] + ey, np.maximum)):
-            out[p].reshape(-1)[has] = f.reduceat(np.append(v, 0.0), idx)[0::2]
-        if not new.all():  # the other slots of each run: their first slot's bounds
-            head = np.maximum.accumulate(np.where(new, np.arange(K), 0), axis=1)
-            flat = (np.arange(n)[:, None] * K + head).ravel()
-            out = np.take(out.reshape(4, n * K), flat, axis=1).reshape(4, n, K)
-        return out
+        return slot_bounds(self.centre[:, 0] - ex, self.centre[:, 0] + ex, self.centre[:, 1] - ey,
+                           self.centre[:, 1] + ey, np.ascontiguousarray(self.start, dtype=np.intp),
+                           np.ascontiguousarray(self.count, dtype=np.intp))
 
     def meet(self, i, ka, other: "SlotBoxes", j, kb, tol: float) -> np.ndarray:
         """For each ``t``: whether slot ``ka[t]`` of row ``i[t]`` meets slot ``kb[t]`` of ``other``'s
