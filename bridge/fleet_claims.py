@@ -76,6 +76,8 @@ class FleetClaims:
         self._req_cache: tuple | None = None
         #: authority: ``(step, ids, claims in force after its decision)`` (:meth:`near_rows`)
         self.in_force: tuple | None = None
+        #: the waiting vehicles' entry claims: ``(id -> (row, spec), claims, indices)`` (:meth:`entry_claims`)
+        self._entry: tuple = ({}, None, None)
 
     @property
     def authority(self) -> bool:
@@ -213,24 +215,44 @@ class FleetClaims:
 
     def entry_claims(self, ready: list, cand: FleetState, with_index: bool = False):
         """Reach claims of the ready vehicles (specs) at rest on their first waypoints (in ``ready``'s
-        order); with ``with_index``: also their membership indices."""
+        order); with ``with_index``: also their membership indices.  A vehicle's entry claims depend on
+        its spec alone (its first waypoints, class and padding at rest there), so they are computed once,
+        at its first admission attempt, and kept while it waits."""
+        bank = self._entry
+        missing = [i for i, sp in enumerate(ready) if bank[0].get(sp.id, (None, None))[1] is not sp]
+        if len(bank[0]) > 4 * len(ready) + 256:  # vehicles admitted long ago: start over
+            bank = self._entry = ({}, None, None)
+            missing = list(range(len(ready)))
+        if missing:
+            got, idx = self._entry_fresh([ready[i] for i in missing], cand.family[missing], cand.centre[missing],
+                                         cand.heading[missing])
+            base = 0 if bank[1] is None else len(bank[1])
+            ids = dict(bank[0])
+            ids.update((ready[i].id, (base + r, ready[i])) for r, i in enumerate(missing))
+            bank = self._entry = (ids, got if bank[1] is None else ReachClaims.concat(bank[1], got),
+                                  idx if bank[2] is None else np.concatenate([bank[2], idx]))
+        rows = np.fromiter((bank[0][sp.id][0] for sp in ready), dtype=np.intp, count=len(ready))
+        out = bank[1].take(rows)
+        return (out, bank[2][rows]) if with_index else out
+
+    def _entry_fresh(self, ready: list, family: np.ndarray, centre: np.ndarray, heading: np.ndarray):
+        """:meth:`entry_claims` computed: ``(claims, indices)`` in ``ready``'s order."""
         parts, rows = [], []
         for c, g in self.groups.items():
-            idx = np.flatnonzero(cand.family == c)
+            idx = np.flatnonzero(family == c)
             if len(idx):
                 pads = np.array([self.spec_pads(ready[i]) for i in idx]).reshape(len(idx), -1)
                 if self.paths is None:
-                    cen, hd, place = cand.centre[idx], cand.heading[idx], None
+                    cen, hd, place = centre[idx], heading[idx], None
                 else:  # at rest on the start of its path: (0, 0), heading 0
                     cen, hd = np.zeros((len(idx), 2)), np.zeros(len(idx))
-                    place = self.paths.entry_place([ready[i] for i in idx], cand.centre[idx], cand.heading[idx])
+                    place = self.paths.entry_place([ready[i] for i in idx], centre[idx], heading[idx])
                 X = self.classes[c].model.equilibrium(cen)
                 parts.append((c, X, cen, hd, g.ctl.index(X, cen, hd), pads, place))
                 rows.append(idx)
         inv = np.empty(len(ready), dtype=np.intp)
         inv[np.concatenate(rows)] = np.arange(len(ready))
-        out = self.reach.claims(parts).take(inv)
-        return (out, np.concatenate([p[4] for p in parts])[inv]) if with_index else out
+        return self.reach.claims(parts).take(inv), np.concatenate([p[4] for p in parts])[inv]
 
     def occupied(self, t: int, cur: FleetState | None, entry: ReachClaims,
                  poses: Callable[[], tuple[np.ndarray, np.ndarray]]) -> ReachClaims:

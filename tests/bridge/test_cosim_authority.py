@@ -211,3 +211,39 @@ def test_frame_setting_validated():
     with pytest.raises(ValueError, match="'path' needs controller 'authority'"):
         CosimSettings(frame="path")
     assert CosimSettings(controller="authority").path_frame and not CosimSettings().path_frame
+
+
+@pytest.mark.parametrize("frame", ["path", "road"])
+def test_entry_claims_are_computed_once_per_waiting_vehicle(frame, monkeypatch):
+    """A queue departing at once onto one road: most vehicles wait many steps for their entry to
+    clear.  Their entry claims (condition (12)) are computed at their first attempt only, and what
+    the admission sees each step equals a fresh computation for the vehicles then waiting (cars and
+    buses mixed: the kept claims have the longer horizon, padded with the last slot)."""
+    from bridge.fleet_claims import FleetClaims
+
+    W = subsample([[0.0, 0.0], [300.0, 0.0]], CLASSES["car"].model.delta)
+    specs = [VehicleSpec(f"q{i}", "bus" if i % 3 == 1 else "car", W, depart_s=0.0) for i in range(6)]
+    sim = Cosim(CLASSES, specs, CosimSettings(controller="authority", frame=frame, seed=1))
+    fresh_rows, seen = [], []
+    real_fresh, real_entry = FleetClaims._entry_fresh, FleetClaims.entry_claims
+
+    def counting(self, ready, *a):
+        fresh_rows.extend(sp.id for sp in ready)
+        return real_fresh(self, ready, *a)
+
+    def checking(self, ready, cand, with_index=False):
+        got = real_entry(self, ready, cand, with_index)
+        want, idx = real_fresh(self, ready, cand.family, cand.centre, cand.heading)
+        K = want.lo.shape[1]
+        assert np.array_equal(got[0].lo[:, :K], want.lo) and np.array_equal(got[0].hi[:, :K], want.hi)
+        assert (got[0].lo[:, K:] == got[0].lo[:, K - 1:K]).all()  # padding: the last slot repeated
+        assert np.array_equal(got[1], idx)
+        seen.append(len(ready))
+        return got
+
+    monkeypatch.setattr(FleetClaims, "_entry_fresh", counting)
+    monkeypatch.setattr(FleetClaims, "entry_claims", checking)
+    sim.run(max_steps=600)
+    assert sum(seen) > 3 * len(specs)  # vehicles waited several steps ...
+    assert sorted(fresh_rows) == sorted(sp.id for sp in specs)  # ... yet each was computed once
+    assert all(r.admitted_s is not None for r in sim.records.values())
