@@ -23,7 +23,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["timed_pairs_plain", "timed_pairs_tight", "reach_boxes", "grid_pairs", "union_bounds", "slot_bounds"]
+__all__ = ["timed_pairs_plain", "timed_pairs_tight", "reach_boxes", "grid_pairs", "union_bounds", "slot_bounds", "path_slots",
+           "cover_boxes", "cover_frame_bounds"]
 
 
 @njit(cache=True, inline="always")
@@ -329,3 +330,101 @@ def slot_bounds(x0, x1, y0, y1, start, count):
                 a3 = _max(a3, y1[b])
             out[0, i, k], out[1, i, k], out[2, i, k], out[3, i, k] = a0, a1, a2, a3
     return out
+
+
+# ---------------------------------------------------------------------- path-frame claims (tm.path_claims)
+@njit(cache=True)
+def path_slots(lo, hi, s_c):
+    """The slots of path-frame claims as path intervals (:func:`tm.path_claims.path_reach_claims`):
+    ``lo``, ``hi`` (n, K, 2) the bare claims in the frame of ``(s_c, 0)``.  Returns the intervals of
+    the slots that start a run of equal slots, ``s_lo, s_hi, n_lo, n_hi`` (m,) (an empty slot: ``[1, 0]
+    x [0, 0]``), their flat slot indices ``first`` (m,), and per slot (n K,) its run's interval."""
+    n, K = lo.shape[0], lo.shape[1]
+    s_lo = np.empty(n * K)
+    s_hi = np.empty(n * K)
+    n_lo = np.empty(n * K)
+    n_hi = np.empty(n * K)
+    first = np.empty(n * K, dtype=np.intp)
+    run = np.empty(n * K, dtype=np.intp)
+    m = 0
+    for i in range(n):
+        for k in range(K):
+            if not (lo[i, k, 0] <= hi[i, k, 0] and lo[i, k, 1] <= hi[i, k, 1]):
+                a, b, c, d = 1.0, 0.0, 0.0, 0.0
+            else:
+                a, b, c, d = lo[i, k, 0] + s_c[i], hi[i, k, 0] + s_c[i], lo[i, k, 1], hi[i, k, 1]
+            if k == 0 or not (a == s_lo[m - 1] and b == s_hi[m - 1] and c == n_lo[m - 1] and d == n_hi[m - 1]):
+                s_lo[m], s_hi[m], n_lo[m], n_hi[m] = a, b, c, d
+                first[m] = i * K + k
+                m += 1
+            run[i * K + k] = m - 1
+    return s_lo[:m], s_hi[:m], n_lo[:m], n_hi[:m], first[:m], run
+
+
+@njit(cache=True)
+def cover_boxes(seg, owner, frame, sl, sh, nl, nh, bk, fr, rt, lf, s_first, s_last, s_start, s_end, s_heading,
+                s_body, s_tangent, s_normal, s_vertices, lean, cos_d, sin_d, cos_b, sin_b):
+    """The boxes of :func:`tm.path_cover.stack_box_cover`, one per ``(interval owner[q], segment
+    seg[q])``: ``centre`` (q, 2), ``heading`` (q,), ``half`` (q, 2).  ``frame[q]``: the interval's frame;
+    ``s_*``: the stack's arrays; ``lean[q]``: the segment's body leans, with ``cos_d, sin_d`` of the
+    heading less the body heading and ``cos_b, sin_b`` of the body heading (computed by the caller)."""
+    q = len(seg)
+    centre = np.empty((q, 2))
+    heading = np.empty(q)
+    half = np.empty((q, 2))
+    inf = np.inf
+    for x in range(q):
+        o, g, f = owner[x], seg[x], frame[x]
+        S0 = -inf if g == s_first[f] else s_start[g]
+        S1 = inf if g == s_last[f] else s_end[g]
+        a = _max(sl[o], S0) - s_start[g]
+        b = _min(sh[o], S1) - s_start[g]
+        nlo, nhi = nl[o], nh[o]
+        hd, t0, t1, n0, n1 = s_heading[g], s_tangent[g, 0], s_tangent[g, 1], s_normal[g, 0], s_normal[g, 1]
+        if lean[x]:  # the reference points' parallelogram bounded in the body's frame
+            c, sn = cos_d[x], sin_d[x]
+            u0, u1, u2, u3 = c * a - sn * nlo, c * a - sn * nhi, c * b - sn * nlo, c * b - sn * nhi
+            v0, v1, v2, v3 = sn * a + c * nlo, sn * a + c * nhi, sn * b + c * nlo, sn * b + c * nhi
+            a = _min(_min(_min(u0, u1), u2), u3)
+            b = _max(_max(_max(u0, u1), u2), u3)
+            nlo = _min(_min(_min(v0, v1), v2), v3)
+            nhi = _max(_max(_max(v0, v1), v2), v3)
+            hd, t0, t1 = s_body[g], cos_b[x], sin_b[x]
+            n0, n1 = -t1, t0
+        lo_x, hi_x = a - bk[o], b + fr[o]
+        lo_y, hi_y = nlo - rt[o], nhi + lf[o]
+        mx, my = 0.5 * (lo_x + hi_x), 0.5 * (lo_y + hi_y)
+        centre[x, 0] = s_vertices[g, 0] + mx * t0 + my * n0
+        centre[x, 1] = s_vertices[g, 1] + mx * t1 + my * n1
+        heading[x] = hd
+        half[x, 0] = 0.5 * (hi_x - lo_x)
+        half[x, 1] = 0.5 * (hi_y - lo_y)
+    return centre, heading, half
+
+
+@njit(cache=True)
+def cover_frame_bounds(centre, half, start, count, pc, cos_p, sin_p, cc, ss):
+    """:func:`tm.path_cover.cover_bounds`: per interval ``i`` (its boxes ``start .. start + count - 1``)
+    the bounding box of its boxes in the frame ``pc[i] + R(h_i)`` (``cos_p``, ``sin_p``: of ``h_i``;
+    ``cc``, ``ss`` (q,): ``|cos|``, ``|sin|`` of each box's heading less its interval's ``h``):
+    ``lo``, ``hi`` (m, 2), inverted without a box."""
+    m = len(start)
+    lo = np.empty((m, 2))
+    hi = np.empty((m, 2))
+    inf = np.inf
+    for i in range(m):
+        a0, a1, b0, b1 = inf, inf, -inf, -inf
+        c, s = cos_p[i], sin_p[i]
+        for x in range(start[i], start[i] + count[i]):
+            d0 = centre[x, 0] - pc[i, 0]
+            d1 = centre[x, 1] - pc[i, 1]
+            u = c * d0 + s * d1
+            v = -s * d0 + c * d1
+            eu = cc[x] * half[x, 0] + ss[x] * half[x, 1]
+            ev = ss[x] * half[x, 0] + cc[x] * half[x, 1]
+            a0 = _min(a0, u - eu)
+            a1 = _min(a1, v - ev)
+            b0 = _max(b0, u + eu)
+            b1 = _max(b1, v + ev)
+        lo[i, 0], lo[i, 1], hi[i, 0], hi[i, 1] = a0, a1, b0, b1
+    return lo, hi

@@ -30,6 +30,7 @@ import numpy as np
 from controllers.path import PathStack
 from tm.path_cover import cover_bounds, stack_box_cover
 from tm.reach import ReachClaims, ReachModel, reach_claims, split_pad
+from tm.kernels import path_slots
 from tm.slot_boxes import SlotBoxes
 
 __all__ = ["PathPlace", "path_reach_claims", "bare_model"]
@@ -97,29 +98,20 @@ def path_reach_claims(rm: ReachModel, bare: ReachModel, X, centre, index, place:
         raise ValueError(f"path_reach_claims: {n} states but {len(place)} places")
     path = reach_claims(bare, X, centre, np.zeros(n), index, boxes=False)
     K = path.lo.shape[1]
-    s_c = np.asarray(centre, dtype=float)[:, 0]
-    lo, hi = path.lo, path.hi
-    empty = ~((lo[..., 0] <= hi[..., 0]) & (lo[..., 1] <= hi[..., 1]))
-    s_lo = np.where(empty, 1.0, lo[..., 0] + s_c[:, None])
-    s_hi = np.where(empty, 0.0, hi[..., 0] + s_c[:, None])
-    n_lo = np.where(empty, 0.0, lo[..., 1])
-    n_hi = np.where(empty, 0.0, hi[..., 1])
     hl, hw = 0.5 * rm.length, 0.5 * rm.width
     if body_pad is not None:
         plo, phi = split_pad(body_pad, n)
         ext = [hl + plo[:, 0], hl + phi[:, 0], hw + plo[:, 1], hw + phi[:, 1]]
     else:
         ext = [np.full(n, hl), np.full(n, hl), np.full(n, hw), np.full(n, hw)]
-    # a slot equal to the one before (a vehicle at rest: every slot past its index is T^0's) is
-    # covered once: the runs of equal slots share their boxes and bounds
-    same = np.zeros((n, K), dtype=bool)
-    same[:, 1:] = ((s_lo[:, 1:] == s_lo[:, :-1]) & (s_hi[:, 1:] == s_hi[:, :-1]) &
-                   (n_lo[:, 1:] == n_lo[:, :-1]) & (n_hi[:, 1:] == n_hi[:, :-1]))
-    first = np.flatnonzero(~same.ravel())             # the slots covered (flat, vehicle-major)
-    run = np.cumsum(~same.ravel()) - 1                # each slot's covered slot, as an index into first
+    # the slots as path intervals ([s_lo, s_hi] x [n_lo, n_hi], an empty one [1, 0] x [0, 0]); a slot
+    # equal to the one before (a vehicle at rest: every slot past its index is T^0's) is covered once:
+    # the runs of equal slots share their boxes and bounds (tm.kernels.path_slots)
+    s_lo, s_hi, n_lo, n_hi, first, run = path_slots(path.lo, path.hi,
+                                                   np.ascontiguousarray(np.asarray(centre, dtype=float)[:, 0]))
     who = first // K                                  # their vehicles
-    boxes = stack_box_cover(place.stack, np.asarray(place.fid)[who], s_lo.ravel()[first], s_hi.ravel()[first],
-                            n_lo.ravel()[first], n_hi.ravel()[first], *(np.asarray(e)[who] for e in ext))
+    boxes = stack_box_cover(place.stack, np.asarray(place.fid)[who], s_lo, s_hi, n_lo, n_hi,
+                            *(np.asarray(e)[who] for e in ext))
     wlo, whi = cover_bounds(boxes, np.asarray(place.centre)[who], np.asarray(place.heading)[who])
     # the cover itself, box by box: on a curve the waypoint's frame bounds it coarsely (a bus body
     # at 45 degrees to it reaches 4.5 m across), and it nests as the interval does

@@ -49,6 +49,7 @@ import numpy as np
 
 from controllers.path import PathError, PathFrame, PathStack
 from tm.geometry import rectangles
+from tm.kernels import cover_boxes, cover_frame_bounds
 
 __all__ = ["PathBoxes", "path_box_cover", "stack_box_cover", "cover_bounds", "path_footprints", "points_in_boxes"]
 
@@ -145,33 +146,18 @@ def stack_box_cover(stack: PathStack, fid, s_lo, s_hi, n_lo, n_hi, back, front, 
     start = np.concatenate([[0], np.cumsum(count)[:-1]]).astype(np.intp) if m else np.zeros(0, np.intp)
     owner = np.repeat(np.arange(m), count)
     seg = i0[owner] + (np.arange(len(owner)) - start[owner])
-    f = fid[owner]
-    S0 = np.where(seg == stack.first[f], -np.inf, stack.start[seg])
-    S1 = np.where(seg == stack.last[f], np.inf, stack.end[seg])
-    a = np.maximum(sl[owner], S0) - stack.start[seg]
-    b = np.minimum(sh[owner], S1) - stack.start[seg]
-    nlo, nhi = nl[owner], nh[owner]
-    heading = stack.heading[seg].copy()
-    tangent, normal = stack.tangent[seg], stack.normal[seg]
-    r = np.flatnonzero(stack.body_heading[seg] != heading)
-    if len(r):  # leaning bodies: the reference points' parallelogram bounded in the body's frame
-        d = heading[r] - stack.body_heading[seg[r]]
-        c, sn = np.cos(d), np.sin(d)
-        xs = np.stack([a[r], a[r], b[r], b[r]])
-        ys = np.stack([nlo[r], nhi[r], nlo[r], nhi[r]])
-        u, v = c * xs - sn * ys, sn * xs + c * ys
-        a, b, nlo, nhi = a.copy(), b.copy(), nlo.copy(), nhi.copy()
-        a[r], b[r], nlo[r], nhi[r] = u.min(0), u.max(0), v.min(0), v.max(0)
-        heading[r] = stack.body_heading[seg[r]]
-        tangent, normal = tangent.copy(), normal.copy()
-        tangent[r] = np.column_stack([np.cos(heading[r]), np.sin(heading[r])])
-        normal[r] = np.column_stack([-tangent[r, 1], tangent[r, 0]])
-    lo_x, hi_x = a - bk[owner], b + fr[owner]
-    lo_y, hi_y = nlo - rt[owner], nhi + lf[owner]
-    mx, my = 0.5 * (lo_x + hi_x), 0.5 * (lo_y + hi_y)
-    centre = stack.vertices[seg] + mx[:, None] * tangent + my[:, None] * normal
-    return PathBoxes(owner=owner, segment=seg, centre=centre, heading=heading,
-                     half=np.column_stack([0.5 * (hi_x - lo_x), 0.5 * (hi_y - lo_y)]), start=start, count=count,
+    # the leaning segments' trigonometry in numpy (the kernel does arithmetic only: tm.kernels)
+    lean = stack.body_heading[seg] != stack.heading[seg]
+    r = np.flatnonzero(lean)
+    cos_d, sin_d, cos_b, sin_b = (np.zeros(len(seg)) for _ in range(4))
+    if len(r):
+        d = stack.heading[seg[r]] - stack.body_heading[seg[r]]
+        cos_d[r], sin_d[r] = np.cos(d), np.sin(d)
+        cos_b[r], sin_b[r] = np.cos(stack.body_heading[seg[r]]), np.sin(stack.body_heading[seg[r]])
+    centre, heading, half = cover_boxes(seg, owner, fid[owner], sl, sh, nl, nh, bk, fr, rt, lf, stack.first,
+                                        stack.last, stack.start, stack.end, stack.heading, stack.body_heading,
+                                        stack.tangent, stack.normal, stack.vertices, lean, cos_d, sin_d, cos_b, sin_b)
+    return PathBoxes(owner=owner, segment=seg, centre=centre, heading=heading, half=half, start=start, count=count,
                      shape=(m,))
 
 
@@ -184,23 +170,11 @@ def cover_bounds(boxes: PathBoxes, centre, heading) -> tuple[np.ndarray, np.ndar
     hi = np.full((m, 2), -np.inf)
     if not len(boxes):
         return lo, hi
-    o = boxes.owner
-    h = np.asarray(heading, dtype=float)[o]
-    c, s = np.cos(h), np.sin(h)
-    d = boxes.centre - np.asarray(centre, dtype=float)[o]
-    u = c * d[:, 0] + s * d[:, 1]
-    v = -s * d[:, 0] + c * d[:, 1]
-    dh = boxes.heading - h
-    cc, ss = np.abs(np.cos(dh)), np.abs(np.sin(dh))
-    eu = cc * boxes.half[:, 0] + ss * boxes.half[:, 1]
-    ev = ss * boxes.half[:, 0] + cc * boxes.half[:, 1]
-    has = np.flatnonzero(boxes.count > 0)
-    at = boxes.start[has]
-    lo[has, 0] = np.minimum.reduceat(u - eu, at)
-    lo[has, 1] = np.minimum.reduceat(v - ev, at)
-    hi[has, 0] = np.maximum.reduceat(u + eu, at)
-    hi[has, 1] = np.maximum.reduceat(v + ev, at)
-    return lo, hi
+    h = np.asarray(heading, dtype=float).reshape(-1)
+    dh = boxes.heading - h[boxes.owner]
+    return cover_frame_bounds(boxes.centre, boxes.half, boxes.start.reshape(-1), boxes.count.reshape(-1),
+                              np.ascontiguousarray(np.asarray(centre, dtype=float).reshape(-1, 2)), np.cos(h),
+                              np.sin(h), np.abs(np.cos(dh)), np.abs(np.sin(dh)))
 
 
 def path_footprints(frame: PathFrame, s, n, length, width) -> np.ndarray:

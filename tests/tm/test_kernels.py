@@ -198,3 +198,110 @@ def test_union_boxes_are_the_slot_boxes_bounds(seed, tight):
     lo, hi = union_aabb(c)
     assert np.array_equal(lo, np.stack([b[0].min(axis=1), b[2].min(axis=1)], axis=1))
     assert np.array_equal(hi, np.stack([b[1].max(axis=1), b[3].max(axis=1)], axis=1))
+
+
+# ------------------------------------------------------------------ path-frame covers
+def _ref_stack_box_cover(stack, fid, sl, sh, nl, nh, bk, fr, rt, lf):
+    """tm.path_cover.stack_box_cover's numpy body before the kernel (centre, heading, half, start, count)."""
+    m = len(sl)
+    ok = (sl <= sh) & (nl <= nh)
+    i0 = stack.first_meeting(fid, np.where(ok, sl, 0.0))
+    i1 = stack.segment(fid, np.where(ok, sh, 0.0))
+    count = np.where(ok, i1 - i0 + 1, 0)
+    start = np.concatenate([[0], np.cumsum(count)[:-1]]).astype(np.intp) if m else np.zeros(0, np.intp)
+    owner = np.repeat(np.arange(m), count)
+    seg = i0[owner] + (np.arange(len(owner)) - start[owner])
+    f = fid[owner]
+    S0 = np.where(seg == stack.first[f], -np.inf, stack.start[seg])
+    S1 = np.where(seg == stack.last[f], np.inf, stack.end[seg])
+    a = np.maximum(sl[owner], S0) - stack.start[seg]
+    b = np.minimum(sh[owner], S1) - stack.start[seg]
+    nlo, nhi = nl[owner], nh[owner]
+    heading = stack.heading[seg].copy()
+    tangent, normal = stack.tangent[seg], stack.normal[seg]
+    r = np.flatnonzero(stack.body_heading[seg] != heading)
+    if len(r):
+        d = heading[r] - stack.body_heading[seg[r]]
+        c, sn = np.cos(d), np.sin(d)
+        xs = np.stack([a[r], a[r], b[r], b[r]])
+        ys = np.stack([nlo[r], nhi[r], nlo[r], nhi[r]])
+        u, v = c * xs - sn * ys, sn * xs + c * ys
+        a, b, nlo, nhi = a.copy(), b.copy(), nlo.copy(), nhi.copy()
+        a[r], b[r], nlo[r], nhi[r] = u.min(0), u.max(0), v.min(0), v.max(0)
+        heading[r] = stack.body_heading[seg[r]]
+        tangent, normal = tangent.copy(), normal.copy()
+        tangent[r] = np.column_stack([np.cos(heading[r]), np.sin(heading[r])])
+        normal[r] = np.column_stack([-tangent[r, 1], tangent[r, 0]])
+    lo_x, hi_x = a - bk[owner], b + fr[owner]
+    lo_y, hi_y = nlo - rt[owner], nhi + lf[owner]
+    mx, my = 0.5 * (lo_x + hi_x), 0.5 * (lo_y + hi_y)
+    centre = stack.vertices[seg] + mx[:, None] * tangent + my[:, None] * normal
+    half = np.column_stack([0.5 * (hi_x - lo_x), 0.5 * (hi_y - lo_y)])
+    return centre, heading, half, start, count, owner
+
+
+def _ref_cover_bounds(centre, heading, half, start, count, owner, pc, ph):
+    m = len(start)
+    lo, hi = np.full((m, 2), np.inf), np.full((m, 2), -np.inf)
+    h = ph[owner]
+    c, s = np.cos(h), np.sin(h)
+    d = centre - pc[owner]
+    u, v = c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]
+    dh = heading - h
+    cc, ss = np.abs(np.cos(dh)), np.abs(np.sin(dh))
+    eu, ev = cc * half[:, 0] + ss * half[:, 1], ss * half[:, 0] + cc * half[:, 1]
+    has = np.flatnonzero(count > 0)
+    if len(has):
+        at = start[has]
+        lo[has, 0], lo[has, 1] = np.minimum.reduceat(u - eu, at), np.minimum.reduceat(v - ev, at)
+        hi[has, 0], hi[has, 1] = np.maximum.reduceat(u + eu, at), np.maximum.reduceat(v + ev, at)
+    return lo, hi
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), lean=st.booleans())
+def test_path_covers_equal_the_numpy_formulas(seed, lean):
+    """Random polyline frames (bodies leaning on some chords, or none), random intervals on them (some
+    empty, some past a frame's ends) and one-sided extents: the boxes, their per-interval bounds in
+    random frames, exactly as the numpy code computed them."""
+    from controllers.path import PathFrame, PathStack
+    from tm.path_cover import cover_bounds, stack_box_cover
+
+    rng = np.random.default_rng(seed)
+    frames = []
+    for _ in range(int(rng.integers(1, 4))):
+        P = np.cumsum(rng.uniform(1, 12, (int(rng.integers(3, 9)), 2)) * rng.choice([-1, 1], (1, 2)), axis=0)
+        leans = np.where(rng.random(len(P) - 1) < 0.5, rng.uniform(-0.5, 0.5, len(P) - 1), 0.0) if lean else None
+        frames.append(PathFrame(P, leans))
+    stack = PathStack(frames)
+    m = 25
+    fid = rng.integers(0, len(frames), m)
+    L = np.array([frames[f].length for f in fid])
+    sl = rng.uniform(-5, L + 5)
+    sh = sl + rng.uniform(-2, 25, m)
+    nl = rng.uniform(-2, 1, m)
+    nh = nl + rng.uniform(-0.5, 2, m)
+    ext = [rng.uniform(0, 3, m) for _ in range(4)]
+    got = stack_box_cover(stack, fid, sl, sh, nl, nh, *ext)
+    centre, heading, half, start, count, owner = _ref_stack_box_cover(stack, fid, sl, sh, nl, nh, *ext)
+    assert np.array_equal(got.centre, centre) and np.array_equal(got.heading, heading)
+    assert np.array_equal(got.half, half) and np.array_equal(got.start, start) and np.array_equal(got.count, count)
+    pc, ph = rng.uniform(-30, 30, (m, 2)), rng.uniform(-np.pi, np.pi, m)
+    lo, hi = cover_bounds(got, pc, ph)
+    rlo, rhi = _ref_cover_bounds(centre, heading, half, start, count, owner, pc, ph)
+    assert np.array_equal(lo, rlo) and np.array_equal(hi, rhi)
+
+
+def test_the_lean_case_is_exercised():
+    """The random frames above put boxes on leaning segments (else the lean arithmetic goes untested)."""
+    from controllers.path import PathFrame, PathStack
+    from tm.path_cover import stack_box_cover
+
+    P = np.array([[0.0, 0.0], [10.0, 0.0], [20.0, 5.0], [30.0, 5.0]])
+    stack = PathStack([PathFrame(P, np.array([0.0, 0.3, 0.0]))])
+    got = stack_box_cover(stack, np.zeros(1, dtype=np.intp), np.array([2.0]), np.array([25.0]), np.array([-0.5]),
+                          np.array([0.5]), 2.0, 2.0, 1.0, 1.0)
+    assert (stack.body_heading[got.segment] != stack.heading[got.segment]).any()
+    ref = _ref_stack_box_cover(stack, np.zeros(1, dtype=np.intp), np.array([2.0]), np.array([25.0]),
+                               np.array([-0.5]), np.array([0.5]), *(np.full(1, e) for e in (2.0, 2.0, 1.0, 1.0)))
+    assert np.array_equal(got.centre, ref[0]) and np.array_equal(got.half, ref[2])
