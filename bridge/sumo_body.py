@@ -41,6 +41,8 @@ import sys
 
 import numpy as np
 
+from bridge.body_kernels import path_pad_run, path_pads_many
+
 __all__ = ["RouteBody", "PadTable", "window_starts", "SAMPLE_M", "AHEAD_M", "BACK_M", "KINK_SLOP_M", "OFFSET_MAX_M",
            "LEAN_MAX_RAD"]
 
@@ -537,56 +539,26 @@ class PadTable:
         """:meth:`pads_run` of a path-frame table: the maxima of ``reach - half`` over the samples of
         waypoint ``k``'s box from ``j0`` on (the very values :meth:`_table` takes, so the same
         floats), and the run's end: the last sample, over the sides whose padding is positive, that
-        still reaches that side's maximum (past it, that side's padding drops)."""
-        lo, hi = self._sample_range(np.array([k]))
-        a, b = max(int(lo[0]), j0), int(hi[0])
-        if a >= b:
-            return np.zeros(4), sys.maxsize
-        v = self._reach_T[:, a:b] - self._half[:, None]
-        r = v.max(axis=1)
-        pos = r > 0.0
-        if not pos.any():
-            return np.zeros(4), sys.maxsize
-        last = (b - a - 1) - np.argmax(v[pos][:, ::-1] == r[pos, None], axis=1)
-        return np.maximum(r, 0.0), a + int(last.min())
-
-    def _sample_range(self, ks: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Path frame: the samples ``[lo, hi)`` of waypoints ``ks``' boxes, ``box_lo <= sig[j] -
-        arc_k[k] <= box_hi`` (a run: the rounded difference does not decrease along ``sig``;
-        :meth:`_table`'s own bound, ``box_hi + 2 L``, lies past it): searchsorted on ``arc + bound``,
-        then the rounding's +-1 settled on the very comparison :meth:`_reach` makes (the two
-        roundings differ by an ulp or so, the samples lie 0.1 m apart: one index at most)."""
-        sig, arc, n = self.sig, self.arc_k[ks], len(self.sig)
-        lo = np.searchsorted(sig, arc + self.box_lo[0], side="left")
-        hi = np.searchsorted(sig, arc + self.box_hi[0], side="right")
-        lo -= (lo > 0) & (sig[np.maximum(lo - 1, 0)] - arc >= self.box_lo[0])
-        lo += (lo < n) & (sig[np.minimum(lo, n - 1)] - arc < self.box_lo[0])
-        hi += (hi < n) & (sig[np.minimum(hi, n - 1)] - arc <= self.box_hi[0])
-        hi -= (hi > 0) & (sig[np.maximum(hi - 1, 0)] - arc > self.box_hi[0])
-        return lo, hi
+        still reaches that side's maximum (past it, that side's padding drops).  The box's samples
+        ``[lo, hi)``: ``box_lo <= sig[j] - arc_k[k] <= box_hi`` (a run: the rounded difference does not
+        decrease along ``sig``; :meth:`_table`'s own bound, ``box_hi + 2 L``, lies past it), found by
+        bisection on ``arc + bound`` and the rounding's +-1 settled on the very comparison
+        :meth:`_reach` makes (the two roundings differ by an ulp or so, the samples lie 0.1 m apart:
+        one index at most); :func:`bridge.body_kernels.path_pad_run`."""
+        pads, j1 = path_pad_run(self.sig, float(self.arc_k[k]), self.box_lo[0], self.box_hi[0], self._reach_T,
+                                self._half, int(j0))
+        return pads, (sys.maxsize if j1 < 0 else int(j1))
 
     def pads_many(self, ks, j0: int) -> np.ndarray:
         """:meth:`pads_at` ``(k, j0)`` for every ``k`` of ``ks`` (m,), one window start, as ``(m, 4)``:
-        the same floats.  A path-frame table takes them in a few array calls (a waypoint's pads are
-        a maximum of the reach over one contiguous run of samples: ``np.maximum.reduceat``), builds
-        no suffix table and keeps nothing; a road-frame one asks :meth:`pads_run` per waypoint."""
+        the same floats.  A path-frame table takes them in one compiled loop (a waypoint's pads are
+        a maximum of the reach over one contiguous run of samples, :func:`bridge.body_kernels.path_pads_many`),
+        builds no suffix table and keeps nothing; a road-frame one asks :meth:`pads_run` per waypoint."""
         ks = np.clip(np.asarray(ks, dtype=np.intp).reshape(-1), 0, len(self.W) - 1)
         if self.frame != "path":
             return np.array([self.pads_run(k, j0)[0] for k in ks.tolist()]).reshape(len(ks), 4)
-        out = np.zeros((len(ks), 4))
-        if not len(ks):
-            return out
-        lo, hi = self._sample_range(ks)
-        a = np.maximum(lo, j0)
-        ok = a < hi
-        if not ok.any():
-            return out
-        a, b = a[ok], hi[ok]
-        idx = np.empty(2 * len(a), dtype=np.intp)
-        idx[0::2], idx[1::2] = a, b
-        m = np.maximum.reduceat(self._reach_T, idx, axis=1)[:, 0::2]
-        out[ok] = np.maximum(m.T - self._half, 0.0)
-        return out
+        return path_pads_many(self.sig, self.arc_k, ks, self.box_lo[0], self.box_hi[0], self._reach_T, self._half,
+                              int(j0))
 
     def window_start(self, sigma_lo: float) -> int:
         """The first sample a window starting at arc ``sigma_lo`` counts: the last one at or before
