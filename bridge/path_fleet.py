@@ -28,7 +28,7 @@ class PathFleet:
     def __init__(self):
         self._frames: dict[str, PathFrame] = {}
         self._S: dict[str, np.ndarray] = {}
-        self._key: tuple = ()
+        self._key: list | None = None  # the groups' id lists and lengths of the last stack (:meth:`stack`)
         self._stack = PathStack([])
         self._offset: dict[int, int] = {}
 
@@ -70,9 +70,12 @@ class PathFleet:
     def stack(self, groups) -> PathStack:
         """The stack of the frames of every vehicle in ``groups`` (in their order), rebuilt when
         the fleet changed; :meth:`fid` gives a group's rows in it."""
-        key = tuple(v for g in groups if g.ids for v in g.ids)
-        if key != self._key:
-            self._stack = PathStack([self._frames[v] for v in key])
+        # a group's id list changes by appending or by being replaced (bridge.groups._Group): the
+        # lists themselves (kept alive here) and their lengths tell whether the fleet changed
+        key = [(g.ids, len(g.ids)) for g in groups if g.ids]
+        old = self._key
+        if old is None or len(old) != len(key) or any(a is not b or m != n for (a, m), (b, n) in zip(old, key)):
+            self._stack = PathStack([self._frames[v] for ids, _ in key for v in ids])
             self._key = key
             self._offset = {}
             o = 0
