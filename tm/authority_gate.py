@@ -221,21 +221,29 @@ class AuthorityGate(JunctionGate):
         wz, wr = z[fresh], row[fresh]
         # chained zones: the intervals that begin at or before the exit slot of one entered now
         # (and so on along the route) are wanted with it, all or none (:meth:`_hand_out`)
-        first = np.r_[0, np.cumsum(cnt)]
         extra_z, extra_r = [], []
-        for f in np.flatnonzero(fresh & self.chain).tolist():
-            rw, n_i = int(row[f]), int(np.searchsorted(first, f, side="right") - 1)
-            span = np.arange(first[n_i], first[n_i + 1])
-            later = span[e[span] > e[f]]
-            later = later[np.argsort(e[later], kind="stable")]  # the route's order
-            reach = int(x[f])
-            for j in later.tolist():
-                if e[j] > reach:
-                    break
-                if ids[rw] not in self.holders[int(z[j])]:
-                    extra_z.append(int(z[j]))
-                    extra_r.append(rw)
-                reach = max(reach, int(x[j]))
+        chained = np.flatnonzero(fresh & self.chain)
+        if len(chained):
+            owner = np.repeat(np.arange(len(r)), cnt)  # each interval's requester (its place in r)
+            ordered: dict[int, list] = {}  # a requester's intervals (entry, zone, exit) in the route's order
+            for f, n_i, rw, ef, xf in zip(chained.tolist(), owner[chained].tolist(), row[chained].tolist(),
+                                          e[chained].tolist(), x[chained].tolist()):
+                runs = ordered.get(n_i)
+                if runs is None:
+                    sp = spans[n_i]
+                    runs = ordered[n_i] = sorted(zip(sp[1].tolist(), sp[0].tolist(), sp[2].tolist()),
+                                                 key=lambda t: t[0])
+                reach = xf
+                held = ids[rw]
+                for ej, zj, xj in runs:
+                    if ej <= ef:  # the intervals that begin after this one, in order
+                        continue
+                    if ej > reach:
+                        break
+                    if held not in self.holders[zj]:
+                        extra_z.append(zj)
+                        extra_r.append(rw)
+                    reach = max(reach, xj)
         if extra_z:  # without duplicates (a zone met by two chains of one row)
             wz, wr = np.r_[wz, extra_z].astype(np.intp), np.r_[wr, extra_r].astype(np.intp)
             m = int(wr.max()) + 1

@@ -703,3 +703,26 @@ def test_a_waiter_held_back_by_a_stalled_holder_alone_holds_nobody_back(stall_st
         let.append("D" in asked)
     assert let == ([False] * 3 + [True] * 4 if stall_steps else [False] * 7)
     assert gate.stalled_passed == 0  # B was not let past A: its corridor meets A's standing box
+
+
+def test_a_chain_of_zones_is_wanted_together_from_its_first_entry():
+    """A route east through five zones: Z0 (passed already), then A, B and C, each guard beginning
+    before the exit slot of the one before: B's entry lies at or before A's exit slot, C's only
+    before B's (past A's: reached through B), and D further on, apart.  A vehicle asking for A's
+    entry wants A, B and C at once (:meth:`AuthorityGate._wanting`), not Z0 behind it nor D; one
+    asking only for a waypoint between the zones wants nothing."""
+    zones = [Zone("Z0", (-70.0, -5.0), (-60.0, 5.0)), Zone("A", (-5.0, -5.0), (5.0, 5.0)),
+             Zone("B", (9.0, -5.0), (19.0, 5.0)), Zone("C", (23.0, -5.0), (33.0, 5.0)),
+             Zone("D", (60.0, -5.0), (70.0, 5.0))]
+    gate = AuthorityGate(zones, {"car": CAR})
+    route = _route((-100.0, -1.6), (100.0, -1.6))
+    f = Scene({}, routes={"V": route}).fleet()
+    zs, e, x, _ = gate.intervals(f, 0)
+    ent, ext = dict(zip(zs.tolist(), e.tolist())), dict(zip(zs.tolist(), x.tolist()))
+    assert set(ent) == {0, 1, 2, 3, 4}
+    assert ent[2] <= ext[1] < ent[3] <= ext[2] < ent[4] - 1  # B chained to A; C to B only; D apart
+    assert ext[0] < ent[1] - 1  # Z0 lies behind, with room between
+    for k, want in ((ent[1] - 1, [1, 2, 3]), (ext[0] + 1, [])):
+        f = Scene({}, k={"V": k}, routes={"V": route}).fleet()
+        wz, wr = gate._wanting(f, np.array([0]), np.zeros((1, 2)), np.zeros((1, 2)))
+        assert sorted(wz.tolist()) == want and set(wr.tolist()) <= {0}
