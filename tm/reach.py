@@ -51,8 +51,8 @@ from tm.geometry import broad_phase
 from tm.kernels import reach_boxes, timed_pairs_plain, timed_pairs_tight, union_bounds
 from tm.slot_boxes import SlotBoxes
 
-__all__ = ["ReachModel", "ReachClaims", "reach_claims", "claims_conflict", "pairwise_conflicts", "world_aabb",
-           "candidate_pairs", "pad_slots", "reach_claims_many", "split_pad", "slot_aabb", "union_aabb", "PREFILTER_TOL_FACTOR"]
+__all__ = ["ReachModel", "ReachClaims", "reach_claims", "reach_claims_many", "claims_conflict", "pairwise_conflicts",
+           "world_aabb", "candidate_pairs", "pad_slots", "split_pad", "slot_aabb", "union_aabb", "PREFILTER_TOL_FACTOR"]
 
 #: The per-slot world bounding boxes that pre-filter the ``timed`` check are compared with
 #: ``PREFILTER_TOL_FACTOR * tol``: two oriented boxes that the separating-axis test with ``tol``
@@ -259,9 +259,10 @@ def reach_claims(rm: ReachModel, X: np.ndarray, centre: np.ndarray, heading: np.
         ``(along, across)`` on both sides, or one-sided ``(back, front, right, left)``
         (:func:`split_pad`); added to the footprint's half extents on those sides.
     boxes : bool
-        Attach the slots' world bounding boxes (:attr:`ReachClaims.slot_boxes`) now, from the
-        planar arrays at hand; False where the boxes are not wanted (path-frame claims are drawn
-        from these boxes of path coordinates, :mod:`tm.path_claims`), else computed on first use.
+        Attach the slots' world bounding boxes (:attr:`ReachClaims.slot_boxes`) now, computed with
+        the boxes (:func:`tm.kernels.reach_boxes`); False where they are not wanted (path-frame
+        claims are drawn from these boxes of path coordinates, :mod:`tm.path_claims`), else
+        computed on first use.
     """
     return reach_claims_many([(rm, X, centre, heading, index, body_offset, body_pad)], boxes)
 
