@@ -78,6 +78,8 @@ Pure numpy, no simulator; safety stays with the traffic manager, which checks ev
 
 from __future__ import annotations
 
+from operator import itemgetter
+
 import numpy as np
 
 from tm.authority_reach import AuthorityReach
@@ -116,6 +118,8 @@ class AuthorityGate(JunctionGate):
         #: vehicle id -> its route's intervals through the guards (:meth:`intervals`)
         self._spans: dict[str, tuple] = {}
         self._span_runs: dict[str, list] = {}  # vehicle id -> its intervals as tuples (:meth:`_span_of`)
+        #: vehicle id -> its intervals ``(entry, zone, exit)`` sorted by entry (:meth:`_wanting`'s chains)
+        self._entry_runs: dict[str, list] = {}
         #: over the run: requests withheld because their stop point would stand in a holder's path
         #: (:meth:`_keep_out`)
         self.wide_withheld = 0
@@ -206,6 +210,7 @@ class AuthorityGate(JunctionGate):
             live = set(ids)
             self._spans = {v: sp for v, sp in self._spans.items() if v in live}
             self._span_runs = {v: sp for v, sp in self._span_runs.items() if v in live}
+            self._entry_runs = {v: sp for v, sp in self._entry_runs.items() if v in live}
         spans = [self.intervals(fleet, i) for i in r.tolist()]  # cached per vehicle
         cnt = np.array([len(sp[0]) for sp in spans], dtype=np.intp)
         if not cnt.sum():
@@ -225,16 +230,15 @@ class AuthorityGate(JunctionGate):
         chained = np.flatnonzero(fresh & self.chain)
         if len(chained):
             owner = np.repeat(np.arange(len(r)), cnt)  # each interval's requester (its place in r)
-            ordered: dict[int, list] = {}  # a requester's intervals (entry, zone, exit) in the route's order
             for f, n_i, rw, ef, xf in zip(chained.tolist(), owner[chained].tolist(), row[chained].tolist(),
                                           e[chained].tolist(), x[chained].tolist()):
-                runs = ordered.get(n_i)
-                if runs is None:
-                    sp = spans[n_i]
-                    runs = ordered[n_i] = sorted(zip(sp[1].tolist(), sp[0].tolist(), sp[2].tolist()),
-                                                 key=lambda t: t[0])
-                reach = xf
                 held = ids[rw]
+                runs = self._entry_runs.get(held)
+                if runs is None:  # its intervals (entry, zone, exit) in the route's order, kept as :meth:`intervals`
+                    sp = spans[n_i]
+                    runs = self._entry_runs[held] = sorted(zip(sp[1].tolist(), sp[0].tolist(), sp[2].tolist()),
+                                                           key=itemgetter(0))
+                reach = xf
                 for ej, zj, xj in runs:
                     if ej <= ef:  # the intervals that begin after this one, in order
                         continue
