@@ -130,6 +130,9 @@ class AuthorityGate(JunctionGate):
         #: over the run: candidates' corridors let past a stalled holder's standing box (:meth:`_passable`)
         self.stalled_passed = 0
         self._wide: dict = {}  # (vehicle, zone, waypoint, first) -> its wide path (:meth:`_wide_path`)
+        #: (vehicle, its path's entry and exit slot, leader, the leader's) -> whether they are the same lanes
+        #: (:meth:`_follows`; the paths are pieces of the routes, which never change)
+        self._lanes: dict = {}
         self._stand_memo: tuple = (None, {})  # (fleet, row -> standing box) (:meth:`_standing`)
         #: (zone, vehicle): tokens handed out with a chained zone's (:meth:`_wanting`) whose holder's
         #: claim has not reached the zone's guard yet; kept until it has (:meth:`_release`)
@@ -304,13 +307,6 @@ class AuthorityGate(JunctionGate):
         for (z, v), c in keep.items():
             self.holders[z][v] = c
 
-    def _path(self, fleet: JunctionFleet, row: int, z: int) -> np.ndarray | None:
-        """Waypoints (m, 2) of row ``row``'s route from zone ``z``'s entry to its exit slot, for the
-        interval holding its stop point or the next one (None if neither lies in one)."""
-        W, _, k = fleet.route(row)
-        span = self._span_of(fleet, row, z, k + 1) or self._span_of(fleet, row, z, k)
-        return None if span is None else W[span[0]:span[1] + 1]
-
     def _follows(self, fleet: JunctionFleet, pos: dict, row: int, z: int, leaders: list) -> bool:
         """A queue through the junction: row ``row`` may take zone ``z``'s token although its
         corridor meets the holders ``leaders``' (or their claims fill its exit slot) when each of
@@ -328,13 +324,23 @@ class AuthorityGate(JunctionGate):
         mine = W[span[0]:span[1] + 1]
         tol = 0.6 * cls.delta
         rows, m = [], 0
+        if len(self._lanes) > 100_000:  # stale keys: start over
+            self._lanes.clear()
         for h in leaders:
             j = pos.get(h)
-            theirs = None if j is None else self._path(fleet, j, z)
-            if theirs is None or len(theirs) == 0:
+            if j is None:
                 return False
-            d = np.linalg.norm(mine[:, None, :] - theirs[None, :, :], axis=2).min(axis=1)
-            if d.max() > tol:
+            Wj, _, kj = fleet.route(j)
+            sj = self._span_of(fleet, j, z, kj + 1) or self._span_of(fleet, j, z, kj)  # as :meth:`_path`
+            if sj is None or sj[1] < sj[0]:
+                return False
+            key = (fleet.ids[row], span[0], span[1], h, sj[0], sj[1])  # both paths: routes only
+            same = self._lanes.get(key)
+            if same is None:
+                theirs = Wj[sj[0]:sj[1] + 1]
+                d = np.linalg.norm(mine[:, None, :] - theirs[None, :, :], axis=2).min(axis=1)
+                same = self._lanes[key] = not d.max() > tol
+            if not same:
                 return False
             c = self.classes[fleet.family[j]]
             rows.append(j)

@@ -726,3 +726,29 @@ def test_a_chain_of_zones_is_wanted_together_from_its_first_entry():
         f = Scene({}, k={"V": k}, routes={"V": route}).fleet()
         wz, wr = gate._wanting(f, np.array([0]), np.zeros((1, 2)), np.zeros((1, 2)))
         assert sorted(wz.tolist()) == want and set(wr.tolist()) <= {0}
+
+
+def test_queue_lanes_are_judged_per_zone():
+    """:meth:`AuthorityGate._follows` compares the follower's path through a zone with its leader's
+    (kept per pair of paths).  A and its leader B drive east in one lane through J; at K B turns
+    north while A goes on: through J they are a queue, through K not -- also when the gate judged
+    J for the same pair before."""
+    K = Zone("K", (35.0, -5.0), (45.0, 5.0))
+    east = _route((-40.0, -1.6), (100.0, -1.6))
+    w1, h1 = _route((-40.0, -1.6), (38.4, -1.6))
+    w2, h2 = _route((38.4, -1.6), (38.4, 60.0))
+    turn = (np.vstack([w1, w2[1:]]), np.r_[h1, h2[1:]])
+
+    def follows(gate, z, k):
+        scene = Scene({}, k=k, routes={"A": east, "B": turn})
+        return gate._follows(scene.fleet(), {"A": 0, "B": 1}, 0, z, ["B"])
+
+    gate = AuthorityGate([J, K], {"car": CAR})
+    f = Scene({}, routes={"A": east}).fleet()
+    zs, e, _, _ = gate.intervals(f, 0)
+    entry = dict(zip(zs.tolist(), e.tolist()))
+    at_j = {"A": entry[0] - 1, "B": entry[0] + 6}
+    at_k = {"A": entry[1] - 1, "B": entry[1] + 6}
+    assert follows(gate, 0, at_j)          # one lane through J: a queue
+    assert not follows(gate, 1, at_k)      # through K B turns away: not one
+    assert not follows(AuthorityGate([J, K], {"car": CAR}), 1, at_k)  # the same judged afresh
