@@ -6,7 +6,7 @@ nests exactly as its interval does (``S_k(t+1) ⊆ S_{k+1}(t)``: the cover of a 
 the cover of the interval, box by box), which a single bounding box in a frame chosen per slot
 does not: a fresh slot bounded in a new frame can stick out of the old one (measured: ``grid``
 seed 1, nine claim violations between fresh claims).  Two slots meet iff some box of one meets
-some box of the other (separating-axis test per pair of boxes).
+some box of the other (separating-axis test per pair of boxes, :func:`tm.kernels.timed_pairs_tight`).
 
 :class:`SlotBoxes` holds the boxes of ``n`` vehicles' ``K`` slots as one flat list of boxes and,
 per vehicle and slot, the first box and the count; shifting, taking rows and padding slots only
@@ -140,23 +140,3 @@ class SlotBoxes:
         return slot_bounds(self.centre[:, 0] - ex, self.centre[:, 0] + ex, self.centre[:, 1] - ey,
                            self.centre[:, 1] + ey, np.ascontiguousarray(self.start, dtype=np.intp),
                            np.ascontiguousarray(self.count, dtype=np.intp))
-
-    def meet(self, i, ka, other: "SlotBoxes", j, kb, tol: float) -> np.ndarray:
-        """For each ``t``: whether slot ``ka[t]`` of row ``i[t]`` meets slot ``kb[t]`` of ``other``'s
-        row ``j[t]`` (some pair of their boxes closer than ``tol``; empty slots never meet)."""
-        from tm.reach import _boxes_overlap  # the separating-axis test of the claims
-
-        i, ka, j, kb = (np.asarray(a, dtype=np.intp) for a in (i, ka, j, kb))
-        out = np.zeros(len(i), dtype=bool)
-        ca, cb = self.count[i, ka], other.count[j, kb]
-        m = ca * cb
-        if not m.sum():
-            return out
-        pair = np.repeat(np.arange(len(i)), m)
-        r = np.arange(len(pair)) - np.repeat(np.cumsum(m) - m, m)
-        a = self.start[i, ka][pair] + r // cb[pair]
-        b = other.start[j, kb][pair] + r % cb[pair]
-        hit = _boxes_overlap(self.centre[a], self.heading[a], -self.half[a], self.half[a],
-                             other.centre[b], other.heading[b], -other.half[b], other.half[b], tol)
-        np.logical_or.at(out, pair[hit], True)
-        return out

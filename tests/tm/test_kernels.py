@@ -81,8 +81,12 @@ def _ref_timed(a, i, b, j, tol):
             if a.tight is None and b.tight is None:
                 hit = _boxes_overlap(a.centre[p], a.heading[p], a.lo[p, ka], a.hi[p, ka],
                                      b.centre[q], b.heading[q], b.lo[q, kb], b.hi[q, kb], tol)
-            else:
-                hit = a.slot_union().meet([p], [ka], b.slot_union(), [q], [kb], tol)[0]
+            else:  # some box of one slot meets some box of the other
+                sa, sb = a.slot_union(), b.slot_union()
+                hit = any(_boxes_overlap(sa.centre[x], sa.heading[x], -sa.half[x], sa.half[x],
+                                         sb.centre[y], sb.heading[y], -sb.half[y], sb.half[y], tol)
+                          for x in range(sa.start[p, ka], sa.start[p, ka] + sa.count[p, ka])
+                          for y in range(sb.start[q, kb], sb.start[q, kb] + sb.count[q, kb]))
             if hit:
                 out[t] = True
                 break

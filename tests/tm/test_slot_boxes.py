@@ -1,11 +1,11 @@
-"""Claim slots as unions of oriented boxes (tm/slot_boxes.py): index moves, compaction, world
-boxes and the pairwise test against brute force.  Exact comparisons: the index moves copy floats;
-the world boxes and the separating-axis test are compared with the same float expressions."""
+"""Claim slots as unions of oriented boxes (tm/slot_boxes.py): index moves, compaction and world
+boxes against brute force (the test of two slots meeting: tests/tm/test_kernels.py).  Exact
+comparisons: the index moves copy floats; the world boxes are compared with the same float
+expressions."""
 
 import numpy as np
 from hypothesis import given, settings, strategies as st
 
-from tm.reach import _boxes_overlap
 from tm.slot_boxes import SlotBoxes
 
 
@@ -52,14 +52,6 @@ def test_slot_boxes_against_brute_force(seed):
     a, b = _random(rng, n, K), _random(rng, n, K)
     box = a.aabb()
     _assert_world_boxes(a, box)
-    i, ka = rng.integers(0, n, 40), rng.integers(0, K, 40)
-    j, kb = rng.integers(0, n, 40), rng.integers(0, K, 40)
-    got = a.meet(i, ka, b, j, kb, 1e-9)
-    for t in range(40):
-        want = any(_boxes_overlap(a.centre[p], a.heading[p], -a.half[p], a.half[p],
-                                  b.centre[q], b.heading[q], -b.half[q], b.half[q], 1e-9)
-                   for p in _boxes_of(a, i[t], ka[t]) for q in _boxes_of(b, j[t], kb[t]))
-        assert got[t] == want
     # index moves and compaction keep every slot's boxes
     c = a.compact()
     assert len(c.heading) == int(a.count.sum())
