@@ -13,6 +13,7 @@ from __future__ import annotations
 import os
 import shutil
 import subprocess
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Iterable
 
@@ -48,6 +49,22 @@ def check_xml(kind: str, path: Path) -> None:
         raise SumoError(f"SUMO {kind} {exc}") from None
 
 
+@contextmanager
+def _session(api, errors: tuple, args: list[str], failure: str):
+    """One SUMO run through ``api`` (started with ``args``, closed however it ends): SUMO's errors
+    (``errors``) become a :class:`SumoError` saying ``failure`` and SUMO's message."""
+    try:
+        api.start(args)
+        yield
+    except errors as exc:
+        raise SumoError(f"{failure}: {exc}") from None
+    finally:
+        try:
+            api.close()
+        except errors:
+            pass
+
+
 def run_native(api, errors: tuple, sumocfg: str | os.PathLike, *, duration_s: float, seed: int,
                tripinfo_path: str | os.PathLike, begin_s: float = 0.0, step_length: float | None = None,
                extra_args: Iterable[str] = ()) -> dict:
@@ -70,8 +87,7 @@ def run_native(api, errors: tuple, sumocfg: str | os.PathLike, *, duration_s: fl
         args += ["--step-length", f"{step_length:.10g}"]
     pairs: set = set()
     steps = departed = 0
-    try:
-        mod.start(args)
+    with _session(mod, errors, args, f"SUMO failed running {sumocfg} with its own drivers"):
         while mod.simulation.getTime() < end - 1e-9 and (
                 steps == 0 or mod.simulation.getMinExpectedNumber() > 0):
             mod.simulationStep()
@@ -81,13 +97,6 @@ def run_native(api, errors: tuple, sumocfg: str | os.PathLike, *, duration_s: fl
                 pairs.add(tuple(sorted((c.collider, c.victim))))
         simulated = float(mod.simulation.getTime()) - begin_s
         in_window = departed + len(mod.simulation.getPendingVehicles())
-    except errors as exc:
-        raise SumoError(f"SUMO failed running {sumocfg} with its own drivers: {exc}") from None
-    finally:
-        try:
-            mod.close()
-        except errors:
-            pass
     return {"steps": steps, "collision_pairs": sorted(pairs), "simulated_s": round(simulated, 3),
             "vehicles_in_window": in_window}
 
@@ -124,8 +133,8 @@ def expand_demand(api, errors: tuple, sumocfg: str | os.PathLike, inputs: Prepar
     # no child-process preflight: the network was checked above (what crashes libsumo) and
     # prepare_inputs parsed every other file; SUMO's own refusals arrive as TraCIException
     seen: dict[str, list] = {}  # id -> [requested depart, type, route, order]
-    try:
-        mod.start(["sumo", *base, "--no-warnings", "true", "--end", f"{end_s:.10g}"])
+    with _session(mod, errors, ["sumo", *base, "--no-warnings", "true", "--end", f"{end_s:.10g}"],
+                  f"SUMO failed expanding the demand of {sumocfg}"):
         veh, sim = mod.vehicle, mod.simulation
         while sim.getTime() < end_s - 1e-9:
             mod.simulationStep()
@@ -150,13 +159,6 @@ def expand_demand(api, errors: tuple, sumocfg: str | os.PathLike, inputs: Prepar
             types[tid] = VehicleType(tid, vclass, float(vt.getLength(tid)), float(vt.getWidth(tid)), "",
                                      accel=float(vt.getAccel(tid)), decel=float(vt.getDecel(tid)),
                                      max_speed=vmax)
-    except errors as exc:
-        raise SumoError(f"SUMO failed expanding the demand of {sumocfg}: {exc}") from None
-    finally:
-        try:
-            mod.close()
-        except errors:
-            pass
     vehicles = []
     for vid, (dep, tid, edges, order) in sorted(seen.items(), key=lambda kv: (kv[1][0], kv[1][3])):
         if not (begin_s - 1e-9 <= dep < end_s - 1e-9):
