@@ -39,7 +39,7 @@ from controllers.speed_limits import SpeedSettings, free_flow_time, route_speeds
 from controllers.stmpc import STMPC
 from controllers.synthesis import synthesize
 from bridge.fleet_claims import FleetClaims
-from bridge.groups import _Group, _headings
+from bridge.groups import _Group, _headings, live_groups
 from bridge.path_fleet import FRAMES, PathFleet
 from bridge.request_filters import RequestFilters
 from tm.reach import ReachClaims
@@ -367,9 +367,6 @@ class Cosim:
         return self.junctions.holders
 
     # -------------------------------------------------------------- state
-    def _live(self) -> list[_Group]:
-        return [g for g in self.groups.values() if g.ids]
-
     def _fleet(self, with_requests: bool):
         """The fleet's state in fleet order (None with no vehicle); ``with_requests``: every vehicle's
         request index ``l'`` w.r.t. its next waypoint and whether it may ask (design.md §2, step 1)."""
@@ -413,7 +410,7 @@ class Cosim:
     def _poses(self) -> tuple[np.ndarray, np.ndarray]:
         """World centres (n, 2) and body headings (n,) of the fleet, in fleet order (road frame: the
         plant's positions and the current waypoints' headings)."""
-        live = self._live()
+        live = live_groups(self.groups)
         if self.paths is None:
             return np.vstack([g.X[:, :2] for g in live]), np.concatenate([g.centres()[1] for g in live])
         groups = list(self.groups.values())
@@ -486,7 +483,7 @@ class Cosim:
     def _switch(self, state: FleetState, dec) -> None:
         """Step 3a: granted vehicles switch (``k <- k + 1``, ``l <- l'``); denials and stop episodes counted."""
         o = 0  # the fleet state concatenates the non-empty groups in order
-        for g in self._live():
+        for g in live_groups(self.groups):
             sl = slice(o, o + len(g.ids))
             o += len(g.ids)
             gmask = np.asarray(dec.go[sl], dtype=bool)
@@ -508,7 +505,7 @@ class Cosim:
         the disturbance policy, the tube invariant (index strictly down until 0) and the state
         constraints counted, speed accumulators."""
         s = self.settings
-        for g in self._live():
+        for g in live_groups(self.groups):
             m = g.vclass.model
             cen, hd, _ = g.centres()
             # the bounds of this step (computed with the requests: a switch moves the waypoint, not the
@@ -550,7 +547,7 @@ class Cosim:
     def _arrive(self, t_s: float) -> None:
         """Step 5: vehicles at their last waypoint with ``l = 0``, or past their arrival waypoint
         (:attr:`VehicleSpec.arrive_k`), arrive at ``t_s`` and leave the world."""
-        for g in self._live():
+        for g in live_groups(self.groups):
             done = g.arrived()
             if done.any():
                 self._flush(g, done)
@@ -668,7 +665,7 @@ class Cosim:
     def flush_records(self) -> None:
         """Bring every :class:`VehicleRecord` up to date (called at the end of :meth:`run`;
         call it before reading ``records`` after stepping by hand)."""
-        for g in self._live():
+        for g in live_groups(self.groups):
             self._flush(g)
 
     # -------------------------------------------------------------- run

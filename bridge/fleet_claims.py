@@ -19,7 +19,7 @@ from typing import Callable
 
 import numpy as np
 
-from bridge.groups import _Group
+from bridge.groups import _Group, live_groups
 from bridge.pad_memo import PadMemo
 from bridge.path_fleet import PathFleet
 from controllers.tolerances import GEOMETRY_TOL
@@ -83,9 +83,6 @@ class FleetClaims:
     def authority(self) -> bool:
         return self.reach is not None
 
-    def _live(self) -> list[_Group]:
-        return [g for g in self.groups.values() if g.ids]
-
     # -------------------------------------------------------------- padding
     def spec_pads(self, sp) -> np.ndarray:
         """The claims' footprint padding (4,) of ``sp`` at rest on its first waypoint, preparing the
@@ -120,7 +117,7 @@ class FleetClaims:
 
     def fleet_pads(self) -> np.ndarray:
         """:meth:`group_pads` of every vehicle, in fleet order."""
-        return np.vstack([self.group_pads(g) for g in self._live()])
+        return np.vstack([self.group_pads(g) for g in live_groups(self.groups)])
 
     def ahead(self, vclass: str) -> float:
         """How far past its waypoint (along its frame) a vehicle's position may be for the padding."""

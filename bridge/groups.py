@@ -11,7 +11,7 @@ from controllers.classes import VehicleClass
 from controllers.speed_limits import RouteSpeeds, bound_at, plan_steps, restart_slack
 from controllers.stmpc import STMPC
 
-__all__ = ["_Group", "_headings"]
+__all__ = ["_Group", "_headings", "live_groups"]
 
 
 #: Columns of a group's waypoint buffer: x, y, heading (the controller's frame), then the speed
@@ -245,3 +245,8 @@ def _headings(W: np.ndarray) -> np.ndarray:
     d = np.diff(W, axis=0)
     h = np.arctan2(d[:, 1], d[:, 0]) if len(d) else np.zeros(0)
     return np.concatenate([h[:1] if len(h) else [0.0], h])
+
+
+def live_groups(groups: dict) -> list[_Group]:
+    """The groups of ``groups`` (class -> :class:`_Group`, fleet order) that have vehicles, in order."""
+    return [g for g in groups.values() if g.ids]

@@ -26,6 +26,7 @@ from typing import Callable
 import numpy as np
 
 from bridge.fleet_claims import FleetClaims
+from bridge.groups import live_groups
 from tm.crossing_gate import CrossingGate
 from tm.junctions import JunctionFleet
 from tm.manager import FleetState
@@ -82,9 +83,6 @@ class RequestFilters:
     def authority(self) -> bool:
         return self.claims.authority
 
-    def _live(self) -> list:
-        return [g for g in self.groups.values() if g.ids]
-
     def apply(self, t: int, state: FleetState | None, claims_now: ReachClaims | None) -> FleetState | None:
         """Step ``t``'s state with the requests the rules withhold turned off (None: no vehicle);
         ``claims_now``: every vehicle's claims before the decision (authority mode)."""
@@ -108,7 +106,7 @@ class RequestFilters:
     # -------------------------------------------------------------- signals
     def _signal_lines(self, ids, centre, heading, length):
         """The fleet's stop lines (:meth:`tm.signals.SignalBook.gather`) from the groups' states."""
-        live = self._live()
+        live = live_groups(self.groups)
         pos, _ = self._poses()
         k = np.concatenate([g.k for g in live])
         speed = np.concatenate([np.linalg.norm(g.X[:, 2:4], axis=1) for g in live])
@@ -143,7 +141,7 @@ class RequestFilters:
         to_red = read()
         if got is None or to_red is None:
             return None
-        live = self._live()
+        live = live_groups(self.groups)
         cap = np.concatenate([g.cap for g in live])
         decel = np.concatenate([np.full(len(g.ids), g.ctl.authority.decel) for g in live])
         return LineTiming(commit=got[0], rest_past=got[1], time_to_red=np.asarray(to_red)[slot], v_cap=cap,
@@ -178,13 +176,13 @@ class RequestFilters:
         fn = getattr(self.world, "claim_pads", None) if self.authority else None
         pads = None
         if fn is not None:  # the claims' body padding along a route (SUMO: bridge.sumo_body)
-            k_end = np.concatenate([g.k_end for g in self._live()])
+            k_end = np.concatenate([g.k_end for g in live_groups(self.groups)])
 
             def pads(rows, idx, ids=state.ids):  # a run-out (never driven): the arrival waypoint's
                 p = fn([ids[r] for r in rows.tolist()], np.minimum(idx, k_end[rows]))
                 return np.zeros((len(idx), 4)) if p is None else p
         fleet = JunctionFleet(state.ids, state.family, cur_lo, cur_hi,
-                              tuple((g.W, g.H, g.k) for g in self._live()), pads)
+                              tuple((g.W, g.H, g.k) for g in live_groups(self.groups)), pads)
         req = self.junctions.withhold(self.t, fleet, state.requesting, new_lo, new_hi)
         self._junction_fleet = fleet
         if not len(r):
@@ -225,7 +223,7 @@ class RequestFilters:
     def _crossings(self, state: FleetState, peds: np.ndarray) -> FleetState:
         """Authority mode: withhold requests that would put a stop point on a crossing the vehicle
         cannot clear before a pedestrian can reach it, or without room past it (tm.crossing_gate)."""
-        routes = [(W, H, k) for g in self._live() for W, H, k in zip(g.W, g.H, g.k.tolist())]
+        routes = [(W, H, k) for g in live_groups(self.groups) for W, H, k in zip(g.W, g.H, g.k.tolist())]
         b = self._claims_now.slot_boxes[:, :, -1]  # where each vehicle stays if denied from now on
         fleet = self._junction_fleet
         limit = None if fleet is None else (lambda i: self.junctions.stop_limit(fleet, i))
