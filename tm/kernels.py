@@ -24,7 +24,7 @@ import numpy as np
 from numba import njit
 
 __all__ = ["timed_pairs_plain", "timed_pairs_tight", "reach_boxes", "grid_pairs", "union_bounds", "slot_bounds", "path_slots",
-           "cover_boxes", "cover_frame_bounds"]
+           "cover_boxes", "cover_frame_bounds", "best_assignments"]
 
 
 @njit(cache=True, inline="always")
@@ -428,3 +428,35 @@ def cover_frame_bounds(centre, half, start, count, pc, cos_p, sin_p, cc, ss):
             b1 = _max(b1, v + ev)
         lo[i, 0], lo[i, 1], hi[i, 0], hi[i, 1] = a0, a1, b0, b1
     return lo, hi
+
+
+@njit(cache=True)
+def best_assignments(start, size, nodes, e_ptr, e_a, e_b, e_excl, w, go):
+    """Exhaustive Go/Stop selection (:func:`tm.selection.select_optimal`) of components one by one:
+    component ``c``'s requesters are ``nodes[start[c] : start[c] + size[c]]`` (bit ``j`` of an
+    assignment is the ``j``-th of them); its constraints are rows ``e_ptr[c] : e_ptr[c + 1]`` of
+    ``e_a``, ``e_b`` (positions within the component) and ``e_excl`` (False: ``g_a <= g_b``,
+    True: ``g_a + g_b <= 1``).  Assignments are tried in order ``0 .. 2^size - 1``; the first of
+    the highest score ``Σ_j w[node_j] g_j`` (summed over ``j`` ascending) among the feasible ones
+    is written to ``go[nodes]``.  All-Stop (assignment 0, score 0) is always feasible."""
+    for c in range(len(start)):
+        s0, s = start[c], size[c]
+        best, best_a = -np.inf, 0
+        for a in range(1 << s):
+            ok = True
+            for e in range(e_ptr[c], e_ptr[c + 1]):
+                ga = (a >> e_a[e]) & 1
+                gb = (a >> e_b[e]) & 1
+                if ga == 1 and (gb == 1 if e_excl[e] else gb == 0):
+                    ok = False
+                    break
+            if not ok:
+                continue
+            score = 0.0
+            for j in range(s):
+                if (a >> j) & 1:
+                    score += w[nodes[s0 + j]]
+            if score > best:
+                best, best_a = score, a
+        for j in range(s):
+            go[nodes[s0 + j]] = ((best_a >> j) & 1) == 1

@@ -20,6 +20,8 @@ import numpy as np
 from scipy.optimize import Bounds, LinearConstraint, milp
 from scipy.sparse import coo_matrix
 
+from tm.kernels import best_assignments
+
 __all__ = ["feasible", "select_greedy", "select_optimal", "propagate_stops", "components"]
 
 
@@ -98,36 +100,6 @@ def components(n: int, edges) -> np.ndarray:
         label = new
 
 
-def _mark(bad: np.ndarray, comp: np.ndarray, violated: np.ndarray) -> None:
-    """``bad[c] |= OR of violated[:, e]`` over the edges ``e`` of component ``c``."""
-    order = np.argsort(comp, kind="stable")
-    starts = np.flatnonzero(np.diff(np.concatenate([[-1], comp[order]])))
-    bad[comp[order][starts]] |= np.logical_or.reduceat(violated.T[order], starts, axis=0)
-
-
-def _enumerate(size: int, nodes: np.ndarray, leq: np.ndarray, excl: np.ndarray, w: np.ndarray,
-               local: np.ndarray) -> np.ndarray:
-    """Best Go rows for ``C`` components of ``size`` nodes each, all at once.
-
-    ``nodes (C, size)`` lists each component's requesters, ``local`` maps a
-    requester to its position in its row; ``leq``/``excl`` rows are global
-    requester indices of these components' edges.  All ``2^size`` assignments
-    of every component are scored in one ``(C, 2^size)`` array; infeasible
-    ones get ``-inf`` (all-Stop is always feasible).
-    """
-    C = len(nodes)
-    bits = ((np.arange(1 << size)[:, None] >> np.arange(size)) & 1).astype(bool)      # (2^s, s)
-    comp = np.full(int(nodes.max()) + 1, -1, dtype=np.intp)
-    comp[nodes] = np.arange(C)[:, None]
-    bad = np.zeros((C, 1 << size), dtype=bool)
-    if len(leq):
-        _mark(bad, comp[leq[:, 0]], bits[:, local[leq[:, 0]]] & ~bits[:, local[leq[:, 1]]])
-    if len(excl):
-        _mark(bad, comp[excl[:, 0]], bits[:, local[excl[:, 0]]] & bits[:, local[excl[:, 1]]])
-    score = np.where(bad, -np.inf, w[nodes] @ bits.T)
-    return bits[np.argmax(score, axis=1)]                                             # (C, s)
-
-
 def _milp(n: int, leq: np.ndarray, excl: np.ndarray, w: np.ndarray, time_limit: float):
     rows = np.arange(len(leq) + len(excl))
     r = np.concatenate([rows, rows])
@@ -148,7 +120,9 @@ def select_optimal(n: int, fixed_hits, leq, excl, weights, rng: np.random.Genera
     Maximises ``Σ weights_i g_i`` subject to the constraints.  Forced stops
     (``fixed_hits > 0``, closed under ``leq``) are fixed first; the rest
     splits into connected components of the constraint graph, each solved
-    alone: exhaustive enumeration (vectorised) up to ``exhaustive_max``
+    alone: exhaustive enumeration (compiled,
+    :func:`tm.kernels.best_assignments`: the first best assignment in
+    counting order, as an argmax over all of them) up to ``exhaustive_max``
     requesters, ``scipy.optimize.milp`` (HiGHS, zero gap) above.
 
     Parameters
@@ -184,23 +158,24 @@ def select_optimal(n: int, fixed_hits, leq, excl, weights, rng: np.random.Genera
     first = np.concatenate([[0], np.cumsum(sizes)[:-1]])
     local = np.empty(n, dtype=np.intp)
     local[by_comp] = np.arange(n) - np.repeat(first, sizes)       # position within its component
-    edge_size = sizes[label[edges[:, 0]]]
-    n_leq = len(leq)
-    for size in np.unique(sizes[sizes > 1]):
+    comp_of = label[edges[:, 0]]                                 # each edge's component
+    small = (sizes > 1) & (sizes <= exhaustive_max)               # indexed by component id
+    if small.any():                                               # exhaustive: one compiled loop
+        ids = np.flatnonzero(small)
+        sel = np.flatnonzero(small[comp_of])
+        sel = sel[np.argsort(comp_of[sel], kind="stable")]        # edges grouped by component
+        e_ptr = np.searchsorted(comp_of[sel], ids, side="left")
+        e_ptr = np.r_[e_ptr, len(sel)].astype(np.intp)
+        best_assignments(first[ids].astype(np.intp), sizes[ids].astype(np.intp), by_comp.astype(np.intp), e_ptr,
+                         np.ascontiguousarray(local[edges[sel, 0]]), np.ascontiguousarray(local[edges[sel, 1]]),
+                         sel >= len(leq), w, go)
+    for size in np.unique(sizes[sizes > exhaustive_max]):        # large components: one MILP each
         comps = np.flatnonzero(sizes == size)
         nodes = by_comp[first[comps][:, None] + np.arange(size)]   # (C, size)
-        sel = edge_size == size
-        cl, ce = edges[:n_leq][sel[:n_leq]], edges[n_leq:][sel[n_leq:]]
-        if size <= exhaustive_max:
-            # bound the (C, 2^size) work arrays by chunking components
-            step = max(1, (1 << 22) // ((1 << size) * max(size * size, 1)))
-            for s0 in range(0, len(comps), step):
-                chunk = nodes[s0:s0 + step]
-                inside = np.zeros(n, dtype=bool)
-                inside[chunk.ravel()] = True
-                go[chunk] = _enumerate(int(size), chunk, cl[inside[cl[:, 0]]], ce[inside[ce[:, 0]]], w, local)
-            continue
-        for row in nodes:                                          # large components: one MILP each
+        in_size = sizes[comp_of] == size
+        n_leq = len(leq)
+        cl, ce = edges[:n_leq][in_size[:n_leq]], edges[n_leq:][in_size[n_leq:]]
+        for row in nodes:
             inside = np.zeros(n, dtype=bool)
             inside[row] = True
             ml, me = local[cl[inside[cl[:, 0]]]], local[ce[inside[ce[:, 0]]]]

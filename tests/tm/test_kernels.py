@@ -309,3 +309,70 @@ def test_the_lean_case_is_exercised():
     ref = _ref_stack_box_cover(stack, np.zeros(1, dtype=np.intp), np.array([2.0]), np.array([25.0]),
                                np.array([-0.5]), np.array([0.5]), *(np.full(1, e) for e in (2.0, 2.0, 1.0, 1.0)))
     assert np.array_equal(got.centre, ref[0]) and np.array_equal(got.half, ref[2])
+
+
+# ----------------------------------------------------------------------------- exhaustive selection
+def _ref_enumerate(size, nodes, leq, excl, w, local):
+    """The numpy enumeration ``best_assignments`` replaced (tm/selection.py before it): every
+    assignment of every component of one size scored at once, infeasible ones ``-inf``, the first
+    argmax."""
+    bits = ((np.arange(1 << size)[:, None] >> np.arange(size)) & 1).astype(bool)
+    comp = np.full(int(nodes.max()) + 1, -1, dtype=np.intp)
+    comp[nodes] = np.arange(len(nodes))[:, None]
+    bad = np.zeros((len(nodes), 1 << size), dtype=bool)
+    for rows, viol in ((leq, lambda a, b: a & ~b), (excl, lambda a, b: a & b)):
+        for (i, j) in rows.tolist():
+            bad[comp[i]] |= viol(bits[:, local[i]], bits[:, local[j]])
+    score = np.where(bad, -np.inf, w[nodes] @ bits.T)
+    return bits[np.argmax(score, axis=1)]
+
+
+def _ref_select(n, leq, excl, w):
+    """``select_optimal``'s exhaustive part with :func:`_ref_enumerate` (no forced stops; every
+    component small): the Go mask."""
+    from tm.selection import components
+    go = np.ones(n, dtype=bool)
+    edges = np.vstack([leq, excl])
+    if not len(edges):
+        return go
+    label = components(n, edges)
+    sizes = np.bincount(label, minlength=n)
+    by_comp = np.argsort(label, kind="stable")
+    first = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+    local = np.empty(n, dtype=np.intp)
+    local[by_comp] = np.arange(n) - np.repeat(first, sizes)
+    for size in np.unique(sizes[sizes > 1]):
+        comps = np.flatnonzero(sizes == size)
+        nodes = by_comp[first[comps][:, None] + np.arange(size)]
+        inside = np.zeros(n, dtype=bool)
+        inside[nodes.ravel()] = True
+        go[nodes] = _ref_enumerate(int(size), nodes, leq[inside[leq[:, 0]]], excl[inside[excl[:, 0]]], w, local)
+    return go
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(2, 40), st.floats(0.0, 0.12), st.booleans())
+def test_exhaustive_selection_equals_the_numpy_enumeration(seed, n, density, ties):
+    """``select_optimal`` (compiled enumeration, ``tm.kernels.best_assignments``) gives the Go mask
+    of the numpy enumeration it replaced on random constraint graphs of many components up to 14
+    requesters, with the manager's weights (integers plus ``u / (2n)``) or exact ties (equal
+    weights, no random part: then the first best assignment in counting order decides, in both)."""
+    from tm.selection import select_optimal
+    rng = np.random.default_rng(seed)
+    pairs = np.array([(i, j) for i in range(n) for j in range(n) if i != j and abs(i - j) <= 4]).reshape(-1, 2)
+    leq = pairs[rng.random(len(pairs)) < density]
+    excl = pairs[(pairs[:, 0] < pairs[:, 1]) & (rng.random(len(pairs)) < 2 * density)]
+    weights = np.full(n, 50) if ties else rng.integers(50, 60, n)
+
+    class _NoNoise:  # exact ties: select_optimal adds rng.random(n) / (2n); here zeros
+        def random(self, m):
+            return np.zeros(m)
+
+    gen = _NoNoise() if ties else np.random.default_rng(seed)
+    go = select_optimal(n, np.zeros(n, dtype=int), leq, excl, weights, gen)
+    w = np.asarray(weights, dtype=float) + (np.zeros(n) if ties else np.random.default_rng(seed).random(n) / (2 * n))
+    from tm.selection import components
+    sizes = np.bincount(components(n, np.vstack([leq, excl])), minlength=n) if len(leq) + len(excl) else np.ones(n)
+    if sizes.max() > 14:  # a MILP component: not the kernel's
+        return
+    np.testing.assert_array_equal(go, _ref_select(n, leq, excl, w))
