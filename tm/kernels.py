@@ -165,6 +165,13 @@ def reach_boxes(E, index, ly, Aa, Ac, ra, ry, v_lo_t, v_hi_t, p_lo_t, p_hi_t, y_
         r = row0 + v
         e0, e1, e2, e3 = E[v, 0], E[v, 1], E[v, 2], E[v, 3]
         for s in range(K_out):
+            if s >= K:  # T^0 whole again: slot K - 1's boxes (the same floats)
+                lo[r, s, 0], lo[r, s, 1], hi[r, s, 0], hi[r, s, 1] = lo[r, K - 1, 0], lo[r, K - 1, 1], \
+                    hi[r, K - 1, 0], hi[r, K - 1, 1]
+                if with_boxes:
+                    W[0, r, s], W[1, r, s], W[2, r, s], W[3, r, s] = W[0, r, K - 1], W[1, r, K - 1], \
+                        W[2, r, K - 1], W[3, r, K - 1]
+                continue
             if s < K - 1:
                 k = s + 1
                 mm = _max(index[v] - k, 0)
