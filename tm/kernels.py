@@ -223,7 +223,8 @@ def grid_pairs(x0, x1, y0, y1, mask, use_mask):
     ``min(x1) >= max(x0)`` on both axes), at least one of them in ``mask`` when ``use_mask``;
     as packed keys ``i n + j``, sorted.  A uniform grid: cell size the (upper) median box extent,
     doubled while the boxes would cover more than ``8 n`` cells; every box is entered in the cells
-    it covers, pairs are formed within each cell and kept only in the cell holding the corner
+    it covers, pairs are formed within each cell (with a mask, only those with a masked box: those
+    come first in a cell) and kept only in the cell holding the corner
     ``max(lo_i, lo_j)`` of their intersection, so each is reported once.  Boxes must not be
     inverted (``x1 >= x0``, ``y1 >= y0``)."""
     n = len(x0)
@@ -260,10 +261,17 @@ def grid_pairs(x0, x1, y0, y1, mask, use_mask):
                 cell[e] = (cx0[b] + u) * width + cy0[b] + w
                 box[e] = b
                 e += 1
-    if cell.max() < (1 << 62) // total:  # sort packed (cell, entry): much faster than argsort
-        order = np.sort(cell * total + np.arange(total)) % total
+    # entries by cell, and within a cell (with use_mask) the masked boxes' first: a pair needs one,
+    # so the pairs of a cell stop at its first unmasked entry
+    late = np.zeros(total, dtype=np.int64)
+    if use_mask:
+        for e in range(total):
+            late[e] = 0 if mask[box[e]] else 1
+    sub = cell * 2 + late
+    if sub.max() < (1 << 62) // total:  # sort packed (cell, late, entry): much faster than argsort
+        order = np.sort(sub * total + np.arange(total)) % total
     else:
-        order = np.argsort(cell, kind="mergesort")
+        order = np.argsort(sub, kind="mergesort")
     cap = max(16, 4 * n)
     key = np.empty(cap, dtype=np.int64)
     m = 0
@@ -275,10 +283,10 @@ def grid_pairs(x0, x1, y0, y1, mask, use_mask):
             end += 1
         for a in range(g, end):
             p = box[order[a]]
+            if use_mask and not mask[p]:
+                break  # it and every entry after it unmasked
             for b in range(a + 1, end):
                 q = box[order[b]]
-                if use_mask and not (mask[p] or mask[q]):
-                    continue
                 cx = max(x0[p], x0[q])
                 cy = max(y0[p], y0[q])
                 if not (min(x1[p], x1[q]) >= cx and min(y1[p], y1[q]) >= cy):
