@@ -88,7 +88,9 @@ from tm.junctions import JunctionFleet, JunctionGate
 from tm.keep_out import KeepOut
 from tm.stalls import StallClock
 
-__all__ = ["AuthorityReach", "AuthorityGate"]  # AuthorityReach: re-exported from tm.authority_reach
+__all__ = ["AuthorityReach", "AuthorityGate"]
+
+_UNSET = object()  # not kept yet (:meth:`AuthorityGate._wide_paths`; None is a kept answer)  # AuthorityReach: re-exported from tm.authority_reach
 
 
 class AuthorityGate(JunctionGate):
@@ -383,21 +385,37 @@ class AuthorityGate(JunctionGate):
         :meth:`AuthorityReach.claim_box` (``T^0`` plus ``L/2`` along, the claims' across half-width
         plus ``W/2`` across, the route's padding there).  None when the route does not leave the
         guard from there (it arrives inside) or the stop point is past the slot."""
-        W, H, k = fleet.route(row)
-        key = (fleet.ids[row], z, k, first)
-        if key in self._wide:
-            return self._wide[key]
+        return self._wide_paths(fleet, [(row, z, first)])[0]
+
+    def _wide_paths(self, fleet: JunctionFleet, asks: list) -> list:
+        """:meth:`_wide_path` of each ``(row, z, first)`` of ``asks``, kept per (vehicle, zone, stop
+        point, first); those not kept yet computed together (their boxes one class at a time)."""
         if len(self._wide) > 100_000:  # stale keys: start over
             self._wide.clear()
-        span = self._span_of(fleet, row, z, k + 1) or self._span_of(fleet, row, z, k)
-        if span is None or not span[2] or first > span[1]:
-            self._wide[key] = None
-            return None
-        idx = np.arange(max(first, 0), span[1] + 1)
-        lo, hi = self.classes[fleet.family[row]].claim_box(fleet.pad(row, idx), H[idx],
-                                                          H[np.minimum(idx + 1, len(H) - 1)])
-        self._wide[key] = found = (W[idx] + lo, W[idx] + hi)
-        return found
+        out, todo = [], []
+        for row, z, first in asks:
+            W, H, k = fleet.route(row)
+            key = (fleet.ids[row], z, k, first)
+            found = self._wide.get(key, _UNSET)
+            if found is _UNSET:
+                span = self._span_of(fleet, row, z, k + 1) or self._span_of(fleet, row, z, k)
+                if span is None or not span[2] or first > span[1]:
+                    found = self._wide[key] = None
+                else:
+                    todo.append((len(out), key, row, W, H, np.arange(max(first, 0), span[1] + 1)))
+            out.append(found)
+        for c in sorted({fleet.family[t[2]] for t in todo}):
+            mine = [t for t in todo if fleet.family[t[2]] == c]
+            pad = np.vstack([fleet.pad(row, idx) for _, _, row, _, _, idx in mine])
+            lo, hi = self.classes[c].claim_box(
+                pad, np.concatenate([H[idx] for *_, H, idx in mine]),
+                np.concatenate([H[np.minimum(idx + 1, len(H) - 1)] for *_, H, idx in mine]))
+            o = 0
+            for n, key, _, W, _, idx in mine:
+                m = len(idx)
+                out[n] = self._wide[key] = (W[idx] + lo[o:o + m], W[idx] + hi[o:o + m])
+                o += m
+        return out
 
     def _standing(self, fleet: JunctionFleet, row: int) -> tuple[np.ndarray, np.ndarray]:
         """World box ``(lo, hi)`` (2,) of row ``row`` at rest at its stop point (padded hold box);
@@ -494,7 +512,7 @@ class AuthorityGate(JunctionGate):
     def _keep_out(self, fleet: JunctionFleet, req: np.ndarray) -> np.ndarray:
         """The requests that stay after :class:`tm.keep_out.KeepOut` (the holders' wide paths kept
         clear of vehicles coming to stand in them), counted as withheld."""
-        out, n = self.keep_out.apply(fleet, req, self.holders, self._wide_path, self._on_route)
+        out, n = self.keep_out.apply(fleet, req, self.holders, self._wide_paths, self._on_route)
         self.requests_withheld += n
         self.wide_withheld += n
         return out

@@ -43,9 +43,9 @@ class KeepOut:
                           default=0.0) + 10.0
 
     def apply(self, fleet: JunctionFleet, req: np.ndarray, holders: Sequence[dict],
-              wide_path: Callable, on_route: Callable) -> tuple[np.ndarray, int]:
+              wide_paths: Callable, on_route: Callable) -> tuple[np.ndarray, int]:
         """Withhold the requests whose requested stop point's standing box
-        (:meth:`AuthorityReach.hold_box`, padded) meets a zone ``z`` holder's wide path (``wide_path``)
+        (:meth:`AuthorityReach.hold_box`, padded) meets a zone ``z`` holder's wide path (``wide_paths``)
         from its stop point on while their current one does not: of vehicles without ``z``'s
         token, and of those on the holder's route (its queue, ``z`` holders that follow it through
         included), for which the path counts from the waypoint after the holder's stop point (a
@@ -63,9 +63,9 @@ class KeepOut:
             The requests that stay so far.
         holders : sequence of dict
             Per zone, its token holders (ids; :attr:`tm.junctions.JunctionGate.holders`).
-        wide_path : callable
-            ``(fleet, row, zone, first) -> (lo, hi) or None``: a holder's path from waypoint ``first``
-            on (:meth:`tm.authority_gate.AuthorityGate._wide_path`).
+        wide_paths : callable
+            ``(fleet, [(row, zone, first), ...]) -> [(lo, hi) or None, ...]``: holders' paths from
+            waypoint ``first`` on (:meth:`tm.authority_gate.AuthorityGate._wide_paths`).
         on_route : callable
             ``(fleet, row, rows, ahead) -> bool array``: which ``rows`` have their stop point ``+ ahead``
             on ``row``'s route (:meth:`tm.authority_gate.AuthorityGate._on_route`).
@@ -83,15 +83,14 @@ class KeepOut:
             return req, 0
         out = req.copy()
         # the holders' paths and the requesters near each (by their claims' boxes, all at once) ...
-        paths = []
+        asks, owner = [], []
         for z, hs in enumerate(holders):
             for h in list(hs):
                 row = pos.get(h)
-                if row is None:
-                    continue
-                path = wide_path(fleet, row, z, fleet.route(row)[2])
-                if path is not None:
-                    paths.append((hs, row, *path))
+                if row is not None:
+                    asks.append((row, z, fleet.route(row)[2]))
+                    owner.append((hs, row))
+        paths = [(hs, row, *path) for (hs, row), path in zip(owner, wide_paths(fleet, asks)) if path is not None]
         if not paths:
             return out, 0
         p_lo = np.array([p[2].min(axis=0) for p in paths]) - self.margin   # (P, 2)

@@ -752,3 +752,34 @@ def test_queue_lanes_are_judged_per_zone():
     assert follows(gate, 0, at_j)          # one lane through J: a queue
     assert not follows(gate, 1, at_k)      # through K B turns away: not one
     assert not follows(AuthorityGate([J, K], {"car": CAR}), 1, at_k)  # the same judged afresh
+
+
+def test_wide_paths_asked_together_equal_each_asked_alone():
+    """:meth:`AuthorityGate._wide_paths` computes the paths not kept yet together, one class at a
+    time (the keep-out rule asks for every holder's at once): the same boxes as each asked alone on a
+    fresh gate, for vehicles of two classes with body padding, a stop point past the slot (None) and
+    a repeated ask; kept answers are the computed ones."""
+    routes = {"A": _right_turn_east_to_north(), "B": _route(*NORTH), "C": _route(*WEST), "D": _route(*EAST)}
+    family = {"A": "truck", "B": "narrow", "C": "truck", "D": "narrow"}
+    reach = {"truck": TRUCK, "narrow": NARROW}
+    k = {"A": 15, "B": 18, "C": 25, "D": 60}  # D: past its exit slot
+
+    def pads(rows, idx):
+        rows, idx = np.asarray(rows), np.asarray(idx)
+        return np.column_stack([0.1 * rows, 0.05 * idx, 0.3 * (rows % 2), 0.01 * idx * (rows + 1)])
+
+    scene = Scene({}, routes=routes, k=k, family=family, reach=reach)
+    fleet = replace(scene.fleet(), pads=pads)
+    asks = [(0, 0, 15), (1, 0, 18), (2, 0, 27), (3, 0, 60), (1, 0, 18), (0, 0, 16)]
+    gate = AuthorityGate([J], {"narrow": NARROW, "truck": TRUCK})
+    together = gate._wide_paths(fleet, asks)
+    assert together[3] is None and all(p is not None for n, p in enumerate(together) if n != 3)
+    for ask, got in zip(asks, together):
+        alone = AuthorityGate([J], {"narrow": NARROW, "truck": TRUCK})._wide_path(fleet, *ask)
+        if alone is None:
+            assert got is None
+            continue
+        np.testing.assert_array_equal(got[0], alone[0])  # the same floats: elementwise, as alone
+        np.testing.assert_array_equal(got[1], alone[1])
+        kept = gate._wide_path(fleet, *ask)
+        assert kept[0] is got[0] or np.array_equal(kept[0], got[0])

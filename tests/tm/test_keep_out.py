@@ -35,7 +35,7 @@ def _apply(fleet, on_route=False):
     req = np.ones(len(fleet.ids), dtype=bool)
     return KeepOut({"car": CAR}).apply(
         fleet, req, [{"H": None}],
-        lambda f, row, z, first: PATH if f.ids[row] == "H" else None,
+        lambda f, asks: [PATH if f.ids[row] == "H" else None for row, _, _ in asks],
         lambda f, row, rows, ahead=0: np.full(len(rows), on_route))
 
 
@@ -66,6 +66,6 @@ def test_requesters_beyond_the_margin_are_not_looked_at(margin_cut):
     if margin_cut:
         ko.margin = 0.0
     out, n = ko.apply(fleet, np.ones(2, dtype=bool), [{"H": None}],
-                      lambda f, row, z, first: PATH if f.ids[row] == "H" else None,
+                      lambda f, asks: [PATH if f.ids[row] == "H" else None for row, _, _ in asks],
                       lambda f, row, rows, ahead=0: np.zeros(len(rows), dtype=bool))
     assert n == (0 if margin_cut else 1) and out[1] == margin_cut
