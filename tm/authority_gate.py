@@ -135,8 +135,6 @@ class AuthorityGate(JunctionGate):
         #: (vehicle, its path's entry and exit slot, leader, the leader's) -> whether they are the same lanes
         #: (:meth:`_follows`; the paths are pieces of the routes, which never change)
         self._lanes: dict = {}
-        #: (vehicle, zone, its stop point, (leader, its stop point) ...) -> :meth:`_queue`'s answer
-        self._queues: dict = {}
         self._stand_memo: tuple = (None, {})  # (fleet, row -> standing box) (:meth:`_standing`)
         #: (zone, vehicle): tokens handed out with a chained zone's (:meth:`_wanting`) whose holder's
         #: claim has not reached the zone's guard yet; kept until it has (:meth:`_release`)
@@ -321,52 +319,24 @@ class AuthorityGate(JunctionGate):
         Then none of them can stop inside the guard: nobody else enters that road but through this
         zone's exit slot, which every other candidate's corridor meets."""
         W, H, k = fleet.route(row)
-        rows = []
-        for h in leaders:
-            j = pos.get(h)
-            if j is None:
-                return False
-            rows.append(j)
-        # whether they drive its lanes, and how far its road must be free: routes and stop points only
-        key = (fleet.ids[row], z, k, tuple((h, fleet.route(j)[2]) for h, j in zip(leaders, rows)))
-        queue = self._queues.get(key)
-        if queue is None:
-            if len(self._queues) > 100_000:  # stale keys: start over
-                self._queues.clear()
-            queue = self._queues[key] = self._queue(fleet, row, z, k, rows)
-        if not queue:
-            return False
-        span, m = queue
-        cls = self.classes[fleet.family[row]]
-        x = span[1]
-        idx = np.arange(x, min(x + m, len(W) - 1) + 1)
-        half = cls.hold_half(H[idx], H[np.minimum(idx + 1, len(H) - 1)])
-        lo, hi = W[idx] - half, W[idx] + half
-        near = np.flatnonzero(np.all((fleet.claim_lo <= hi.max(axis=0)) & (fleet.claim_hi >= lo.min(axis=0)), axis=1))
-        near = near[~np.isin(near, [row] + rows)]  # the queue's own claims do not count
-        c_lo, c_hi = fleet.claim_lo[near], fleet.claim_hi[near]
-        return not np.any(np.all((lo[:, None, :] <= c_hi[None]) & (hi[:, None, :] >= c_lo[None]), axis=2))
-
-    def _queue(self, fleet: JunctionFleet, row: int, z: int, k: int, rows: list):
-        """:meth:`_follows`' test of the routes: ``(span, m)`` -- row ``row``'s interval through zone
-        ``z`` and how many waypoints past its exit slot must be free -- when each of ``rows`` drives the
-        same path through the zone, else False."""
-        W = fleet.route(row)[0]
         span = self._span_of(fleet, row, z, k + 1)
         if span is None or not span[2]:
             return False
         cls = self.classes[fleet.family[row]]
         mine = W[span[0]:span[1] + 1]
         tol = 0.6 * cls.delta
-        m = 0
+        rows, m = [], 0
         if len(self._lanes) > 100_000:  # stale keys: start over
             self._lanes.clear()
-        for j in rows:
+        for h in leaders:
+            j = pos.get(h)
+            if j is None:
+                return False
             Wj, _, kj = fleet.route(j)
             sj = self._span_of(fleet, j, z, kj + 1) or self._span_of(fleet, j, z, kj)  # as :meth:`_path`
             if sj is None or sj[1] < sj[0]:
                 return False
-            key = (fleet.ids[row], span[0], span[1], fleet.ids[j], sj[0], sj[1])  # both paths: routes only
+            key = (fleet.ids[row], span[0], span[1], h, sj[0], sj[1])  # both paths: routes only
             same = self._lanes.get(key)
             if same is None:
                 theirs = Wj[sj[0]:sj[1] + 1]
@@ -375,8 +345,16 @@ class AuthorityGate(JunctionGate):
             if not same:
                 return False
             c = self.classes[fleet.family[j]]
+            rows.append(j)
             m += int(np.ceil((0.5 * (c.length + cls.length) + c.hold + cls.hold) / cls.delta))
-        return span, m
+        x = span[1]
+        idx = np.arange(x, min(x + m, len(W) - 1) + 1)
+        half = cls.hold_half(H[idx], H[np.minimum(idx + 1, len(H) - 1)])
+        lo, hi = W[idx] - half, W[idx] + half
+        near = np.flatnonzero(np.all((fleet.claim_lo <= hi.max(axis=0)) & (fleet.claim_hi >= lo.min(axis=0)), axis=1))
+        near = near[~np.isin(near, [row] + rows)]  # the queue's own claims do not count
+        c_lo, c_hi = fleet.claim_lo[near], fleet.claim_hi[near]
+        return not np.any(np.all((lo[:, None, :] <= c_hi[None]) & (hi[:, None, :] >= c_lo[None]), axis=2))
 
     # ------------------------------------------------------------------ the moving claims' width
     def _wide_path(self, fleet: JunctionFleet, row: int, z: int, first: int):
