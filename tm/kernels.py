@@ -147,11 +147,12 @@ def _table(T, m, w, w0, dw, up):
 
 @njit(cache=True)
 def reach_boxes(E, index, ly, Aa, Ac, ra, ry, v_lo_t, v_hi_t, p_lo_t, p_hi_t, y_lo_t, y_hi_t, G, H, w0, dw,
-                margin, fx_lo, fx_hi, fy_lo, fy_hi, K, centre, cos_h, sin_h, lo, hi, W, row0, with_boxes):
+                margin, fx_lo, fx_hi, fy_lo, fy_hi, K, centre, cos_h, sin_h, lo, hi, W, U, row0, with_boxes):
     """The claim boxes of :func:`tm.reach.reach_claims`, written to rows ``row0 ..`` of ``lo``, ``hi``
     (rows, K_out, 2) (along, across in the segment frame, footprint added, empty slots ``+inf,
     -inf``) and, with ``with_boxes``, of ``W`` (4, rows, K_out): their world bounding boxes
-    (:func:`tm.reach.slot_aabb`).  Slots ``K - 1 ..`` are ``T^0`` whole (the last slot, repeated up
+    (:func:`tm.reach.slot_aabb`), and of ``U`` (rows, 4): the bounds over each row's slots,
+    ``x_lo, x_hi, y_lo, y_hi`` (:func:`union_bounds` of ``W``'s rows, the same floats).  Slots ``K - 1 ..`` are ``T^0`` whole (the last slot, repeated up
     to ``K_out``: it stands for every later step).
 
     ``E`` (n, 4): segment-frame errors; ``index`` (n,); ``ly`` (n,): the across factor's level plus
@@ -215,6 +216,8 @@ def reach_boxes(E, index, ly, Aa, Ac, ra, ry, v_lo_t, v_hi_t, p_lo_t, p_hi_t, y_
             W[1, r, s] = wx + ex
             W[2, r, s] = wy - ey
             W[3, r, s] = wy + ey
+        if with_boxes:
+            _row_bounds(W, r, U)
 
 
 @njit(cache=True)
@@ -303,23 +306,30 @@ def grid_pairs(x0, x1, y0, y1, mask, use_mask):
     return np.sort(key[:m])
 
 
+@njit(cache=True, inline="always")
+def _row_bounds(W, i, U):
+    """``U[i]`` = the bounds over row ``i``'s slot boxes in ``W`` (4, n, K): ``x_lo, x_hi, y_lo, y_hi``,
+    slot 0 first, then each later slot's in order (``K >= 1``)."""
+    K = W.shape[2]
+    x0, x1, y0, y1 = W[0, i, 0], W[1, i, 0], W[2, i, 0], W[3, i, 0]
+    for k in range(1, K):
+        x0 = _min(x0, W[0, i, k])
+        x1 = _max(x1, W[1, i, k])
+        y0 = _min(y0, W[2, i, k])
+        y1 = _max(y1, W[3, i, k])
+    U[i, 0], U[i, 1], U[i, 2], U[i, 3] = x0, x1, y0, y1
+
+
 @njit(cache=True)
 def union_bounds(W):
     """Per row of world slot boxes ``W`` (4, n, K) (``x_lo, x_hi, y_lo, y_hi``; empty slots
-    ``+inf, -inf``): the bounds over its slots, ``lo`` and ``hi`` (n, 2) (inverted when all are
-    empty) -- :func:`tm.reach.union_aabb`'s minima and maxima."""
-    n, K = W.shape[1], W.shape[2]
-    lo = np.empty((n, 2))
-    hi = np.empty((n, 2))
+    ``+inf, -inf``; ``K >= 1``): the bounds over its slots, ``lo`` and ``hi`` (n, 2) (inverted when
+    all are empty) -- :func:`tm.reach.union_aabb`'s minima and maxima."""
+    n = W.shape[1]
+    U = np.empty((n, 4))
     for i in range(n):
-        x0, x1, y0, y1 = W[0, i, 0], W[1, i, 0], W[2, i, 0], W[3, i, 0]
-        for k in range(1, K):
-            x0 = _min(x0, W[0, i, k])
-            x1 = _max(x1, W[1, i, k])
-            y0 = _min(y0, W[2, i, k])
-            y1 = _max(y1, W[3, i, k])
-        lo[i, 0], lo[i, 1], hi[i, 0], hi[i, 1] = x0, y0, x1, y1
-    return lo, hi
+        _row_bounds(W, i, U)
+    return U
 
 
 @njit(cache=True)
@@ -327,9 +337,11 @@ def slot_bounds(x0, x1, y0, y1, start, count):
     """World bounding boxes ``(4, n, K)`` of slots that are unions of boxes (:meth:`tm.slot_boxes.
     SlotBoxes.aabb`): ``x0 .. y1`` (q,) the boxes' own bounds, each slot the boxes ``start ..
     start + count - 1``; empty slots inverted (``+inf, -inf``).  A slot with the same boxes as the one
-    before it copies that one's bounds."""
+    before it copies that one's bounds.  Also the bounds over each row's slots, ``U`` (n, 4)
+    (:func:`union_bounds` of the result, the same floats; with ``K >= 1``)."""
     n, K = start.shape
     out = np.empty((4, n, K))
+    U = np.empty((n, 4))
     inf = np.inf
     for i in range(n):
         for k in range(K):
@@ -344,7 +356,9 @@ def slot_bounds(x0, x1, y0, y1, start, count):
                 a2 = _min(a2, y0[b])
                 a3 = _max(a3, y1[b])
             out[0, i, k], out[1, i, k], out[2, i, k], out[3, i, k] = a0, a1, a2, a3
-    return out
+        if K:
+            _row_bounds(out, i, U)
+    return out, U
 
 
 # ---------------------------------------------------------------------- path-frame claims (tm.path_claims)

@@ -164,8 +164,22 @@ class ReachClaims:
         slots inverted: ``+inf, -inf``); computed on first use, carried by :meth:`shift`,
         :meth:`take` and :meth:`concat` when present."""
         if self.tight is not None:
-            return self.tight.aabb()
+            out, U = self.tight.aabb_union()
+            self.__dict__.setdefault("union_bounds", U)  # the same pass: kept for union_aabb
+            return out
         return slot_aabb(self.centre, self.heading, self.lo, self.hi)
+
+    @cached_property
+    def union_bounds(self) -> np.ndarray:
+        """Per vehicle, the bounds over its slots' world bounding boxes (:attr:`slot_boxes`), ``(n, 4)``:
+        ``x_lo, x_hi, y_lo, y_hi`` (inverted when every slot is empty); computed with the slot boxes
+        where they are (:func:`reach_claims_many`, :meth:`SlotBoxes.aabb_union`), else on first use."""
+        b = self.slot_boxes
+        if "union_bounds" in self.__dict__:  # set by slot_boxes just now
+            return self.__dict__["union_bounds"]
+        if not b.shape[2]:
+            return np.tile([np.inf, -np.inf, np.inf, -np.inf], (b.shape[1], 1))
+        return union_bounds(np.ascontiguousarray(b))
 
     def slot_union(self) -> SlotBoxes:
         """The slots as unions of boxes: :attr:`tight`, or the claims' own boxes (one per slot)."""
@@ -173,9 +187,11 @@ class ReachClaims:
             return self.tight
         return SlotBoxes.from_frames(self.centre, self.heading, self.lo, self.hi)
 
-    def _with_boxes(self, boxes) -> "ReachClaims":
+    def _with_boxes(self, boxes, union=None) -> "ReachClaims":
         if boxes is not None:
             self.__dict__["slot_boxes"] = boxes  # the cached_property's slot (frozen dataclass)
+        if union is not None:
+            self.__dict__["union_bounds"] = union
         return self
 
     def _boxes(self) -> np.ndarray | None:
@@ -191,10 +207,10 @@ class ReachClaims:
             None if b is None else np.concatenate([b[:, :, 1:], b[:, :, -1:]], axis=2))
 
     def take(self, idx) -> "ReachClaims":
-        b = self._boxes()
+        b, u = self._boxes(), self.__dict__.get("union_bounds")
         return ReachClaims(self.centre[idx], self.heading[idx], self.lo[idx], self.hi[idx],
                            None if self.tight is None else self.tight.take(idx))._with_boxes(
-            None if b is None else np.take(b, idx, axis=1))
+            None if b is None else np.take(b, idx, axis=1), None if u is None else u[idx])
 
     @staticmethod
     def concat(*parts: "ReachClaims") -> "ReachClaims":
@@ -276,16 +292,17 @@ def reach_claims_many(groups, boxes: bool = True) -> ReachClaims:
     K_out = max((g[0].K for g in groups), default=1)
     lo, hi = np.empty((n, K_out, 2)), np.empty((n, K_out, 2))
     W = np.empty((4, n if boxes else 0, K_out))
+    U = np.empty((n if boxes else 0, 4))
     row0 = 0
     for args, centre, _ in ins:
-        reach_boxes(*args, lo, hi, W, row0, boxes)
+        reach_boxes(*args, lo, hi, W, U, row0, boxes)
         row0 += len(centre)
     if len(ins) == 1:
         centre, heading = ins[0][1], ins[0][2]
     else:
         centre, heading = np.concatenate([i[1] for i in ins]), np.concatenate([i[2] for i in ins])
     out = ReachClaims(centre, heading, lo, hi)
-    return out._with_boxes(W) if boxes else out
+    return out._with_boxes(W, U) if boxes else out
 
 
 def _reach_inputs(rm: ReachModel, X, centre, heading, index, body_offset=0.0, body_pad=None) -> tuple:
@@ -465,10 +482,8 @@ def _slot_aabb_planar(centre, heading, l0, h0, l1, h1) -> np.ndarray:
 def union_aabb(claims: ReachClaims) -> tuple[np.ndarray, np.ndarray]:
     """World bounding boxes (n, 2) of the union of every vehicle's slot boxes (inverted when all are
     empty): inside :func:`world_aabb`, enough for the ``timed`` check (a conflict is a slot overlap)."""
-    b = claims.slot_boxes
-    if not b.shape[2]:
-        return np.full((b.shape[1], 2), np.inf), np.full((b.shape[1], 2), -np.inf)
-    return union_bounds(np.ascontiguousarray(b))
+    U = claims.union_bounds
+    return U[:, [0, 2]], U[:, [1, 3]]
 
 
 def world_aabb(claims: ReachClaims) -> tuple[np.ndarray, np.ndarray]:

@@ -128,12 +128,17 @@ class SlotBoxes:
         A run of slots with the same boxes (a vehicle at rest: every slot past its index is
         ``T^0``'s, :func:`tm.path_claims.path_reach_claims`; a shifted last slot) is bounded once,
         at its first slot, and copied along the run."""
+        return self.aabb_union()[0]
+
+    def aabb_union(self) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`aabb` and, in the same pass, the bounds over each vehicle's slots, ``(n, 4)``:
+        ``x_lo, x_hi, y_lo, y_hi`` (``+inf, -inf`` when every slot is empty)."""
         n, K = self.start.shape
         if not len(self.heading) or not n or not K:
             out = np.empty((4, n, K))
             out[0] = out[2] = np.inf
             out[1] = out[3] = -np.inf
-            return out
+            return out, np.tile([np.inf, -np.inf, np.inf, -np.inf], (n, 1))
         c, s = np.abs(np.cos(self.heading)), np.abs(np.sin(self.heading))
         ex = c * self.half[:, 0] + s * self.half[:, 1]
         ey = s * self.half[:, 0] + c * self.half[:, 1]

@@ -187,6 +187,13 @@ def test_claims_of_several_classes_written_in_place_equal_their_concatenation(ca
     want = ReachClaims.concat(*(reach_claims(*g[:5], body_offset=g[5], body_pad=g[6]) for g in groups))
     for name in ("centre", "heading", "lo", "hi", "slot_boxes"):
         assert np.array_equal(getattr(got, name), getattr(want, name)), name
+    # the bounds over each row's slots, made in the same pass (reach_boxes), are numpy's over the boxes
+    assert "union_bounds" in got.__dict__
+    b = got.slot_boxes
+    ref = np.stack([b[0].min(axis=1), b[1].max(axis=1), b[2].min(axis=1), b[3].max(axis=1)], axis=1)
+    assert np.array_equal(got.union_bounds, ref)
+    rows = np.array([12, 0, 8, 3])  # carried by take
+    assert np.array_equal(got.take(rows).__dict__["union_bounds"], ref[rows])
 
 
 @settings(max_examples=30, deadline=None)
@@ -199,6 +206,7 @@ def test_union_boxes_are_the_slot_boxes_bounds(seed, tight):
     rng = np.random.default_rng(seed)
     c = _random_claims(rng, 9, int(rng.integers(1, 6)), tight)
     b = c.slot_boxes
+    assert ("union_bounds" in c.__dict__) == tight  # unions of boxes: bounded in the slot boxes' pass
     lo, hi = union_aabb(c)
     assert np.array_equal(lo, np.stack([b[0].min(axis=1), b[2].min(axis=1)], axis=1))
     assert np.array_equal(hi, np.stack([b[1].max(axis=1), b[3].max(axis=1)], axis=1))
