@@ -88,9 +88,9 @@ from tm.junctions import JunctionFleet, JunctionGate
 from tm.keep_out import KeepOut
 from tm.stalls import StallClock
 
-__all__ = ["AuthorityReach", "AuthorityGate"]
+__all__ = ["AuthorityReach", "AuthorityGate"]  # AuthorityReach: re-exported from tm.authority_reach
 
-_UNSET = object()  # not kept yet (:meth:`AuthorityGate._wide_paths`; None is a kept answer)  # AuthorityReach: re-exported from tm.authority_reach
+_UNSET = object()  # not kept yet (:meth:`AuthorityGate._wide_paths`; None is a kept answer)
 
 
 class AuthorityGate(JunctionGate):

@@ -152,8 +152,9 @@ def reach_boxes(E, index, ly, Aa, Ac, ra, ry, v_lo_t, v_hi_t, p_lo_t, p_hi_t, y_
     (rows, K_out, 2) (along, across in the segment frame, footprint added, empty slots ``+inf,
     -inf``) and, with ``with_boxes``, of ``W`` (4, rows, K_out): their world bounding boxes
     (:func:`tm.reach.slot_aabb`), and of ``U`` (rows, 4): the bounds over each row's slots,
-    ``x_lo, x_hi, y_lo, y_hi`` (:func:`union_bounds` of ``W``'s rows, the same floats).  Slots ``K - 1 ..`` are ``T^0`` whole (the last slot, repeated up
-    to ``K_out``: it stands for every later step).
+    ``x_lo, x_hi, y_lo, y_hi`` (:func:`union_bounds` of ``W``'s rows, the same floats).  Slots
+    ``K - 1 ..`` are ``T^0`` whole (the last slot, repeated up to ``K_out``: it stands for every
+    later step).
 
     ``E`` (n, 4): segment-frame errors; ``index`` (n,); ``ly`` (n,): the across factor's level plus
     one, at most ``index`` (or ``index`` itself without an across factor); ``Aa``, ``Ac`` (K-1, 2, 2),
@@ -323,8 +324,8 @@ def _row_bounds(W, i, U):
 @njit(cache=True)
 def union_bounds(W):
     """Per row of world slot boxes ``W`` (4, n, K) (``x_lo, x_hi, y_lo, y_hi``; empty slots
-    ``+inf, -inf``; ``K >= 1``): the bounds over its slots, ``lo`` and ``hi`` (n, 2) (inverted when
-    all are empty) -- :func:`tm.reach.union_aabb`'s minima and maxima."""
+    ``+inf, -inf``; ``K >= 1``): the bounds over its slots, ``U`` (n, 4): ``x_lo, x_hi, y_lo, y_hi``
+    (inverted when all are empty) -- :attr:`tm.reach.ReachClaims.union_bounds`."""
     n = W.shape[1]
     U = np.empty((n, 4))
     for i in range(n):
