@@ -27,6 +27,7 @@ manager.  One step (``Ts``) is:
 from __future__ import annotations
 
 import time
+from types import SimpleNamespace
 from dataclasses import dataclass, field, replace
 from typing import Protocol
 
@@ -38,12 +39,13 @@ from controllers.settings import AUTHORITY_MAX_LEVELS, ControllerSettings, Synth
 from controllers.speed_limits import SpeedSettings, free_flow_time, route_speeds
 from controllers.stmpc import STMPC
 from controllers.synthesis import synthesize
+from bridge.departure import DepartPlan, Start, start_ladder
 from bridge.fleet_claims import FleetClaims
 from bridge.groups import _Group, _headings, live_groups
 from bridge.path_fleet import FRAMES, PathFleet
 from bridge.request_filters import RequestFilters
-from tm.reach import ReachClaims
-from tm.reach_book import ReachBook, admit_reach
+from tm.reach import ReachClaims, world_aabb
+from tm.reach_book import ReachBook, admit_reach, footprint_claims
 from tm.authority_gate import AuthorityGate
 from tm.authority_reach import AuthorityReach
 from tm.junctions import ClassReach, JunctionGate, Zone
@@ -80,6 +82,9 @@ class VehicleSpec:
     #: for the end of its route (SUMO's vehicles leave there at speed).  None: the vehicle arrives
     #: at rest on its last waypoint.
     arrive_k: int | None = None
+    #: where and how fast SUMO would start it (its departPos / departSpeed, :mod:`bridge.departure`):
+    #: admission tries that start first; None: at rest on its first waypoint (authority mode only)
+    depart: DepartPlan | None = None
 
     @property
     def arrival_index(self) -> int:
@@ -152,7 +157,7 @@ class CosimSettings:
 class World(Protocol):
     """What the loop needs from a simulator."""
 
-    def insert(self, spec: VehicleSpec, vclass: VehicleClass) -> None: ...
+    def insert(self, spec: VehicleSpec, vclass: VehicleClass, k: int = 0) -> None: ...
     def push(self, ids: list[str], centre: np.ndarray, heading: np.ndarray) -> None: ...
     def finish(self, vid: str) -> None: ...
     def step(self) -> list[tuple[str, str]]: ...
@@ -161,7 +166,7 @@ class World(Protocol):
 class FreePlaneWorld:
     """No simulator: muvsim's own plant and geometric monitor are the whole world."""
 
-    def insert(self, spec, vclass) -> None:
+    def insert(self, spec, vclass, k: int = 0) -> None:
         pass
 
     def push(self, ids, centre, heading) -> None:
@@ -270,6 +275,8 @@ class Cosim:
         self.monitor = Monitor(settings.tm.check)
         self.pending = sorted(specs, key=lambda s: (s.depart_s, s.id))
         self._heading0: dict[str, float] = {}
+        #: per waiting vehicle: ``(spec, its starts)`` (:meth:`_starts`)
+        self._start_cache: dict[str, tuple] = {}
         self.records = {s.id: VehicleRecord(s.id, s.vclass, s.depart_s, s.route_length_m) for s in specs}
         self._speeds = {}
         for s_ in specs:  # validated speed tables and free-flow times, before anything runs
@@ -598,7 +605,12 @@ class Cosim:
 
     def _admit(self, t_s: float) -> int:
         """Admit the waiting vehicles due by ``t_s`` whose initial tube is free (condition (12)), that miss
-        every token holder's corridor and every walking region a pedestrian can reach; returns how many."""
+        every token holder's corridor and every walking region a pedestrian can reach; returns how many.
+
+        Authority mode: a vehicle with a departure plan (SUMO's ``departPos`` / ``departSpeed``,
+        :mod:`bridge.departure`) has several starts, tried in order: round ``j`` tries the ``j``-th
+        start of every vehicle not yet admitted, against the claims of the vehicles in the network
+        and of those admitted in earlier rounds."""
         n_ready = 0  # pending is sorted by departure: the ready ones are a prefix
         while n_ready < len(self.pending) and self.pending[n_ready].depart_s <= t_s + 1e-9:
             n_ready += 1
@@ -611,29 +623,143 @@ class Cosim:
             heading=np.array([self._first_heading(sp) for sp in ready]),
             length=np.array([self.classes[sp.vclass].length for sp in ready]),
             width=np.array([self.classes[sp.vclass].width for sp in ready]))
-        entry = None
-        if self.authority:  # the others' reach claims and their footprints now (condition (12))
-            entry = self.claims.entry_claims(ready, cand, with_index=True)
-            now = self.claims.occupied(self.t, self._fleet(with_requests=False), entry[0], self._poses)
-            ok = admit_reach(now, entry[0], self.settings.tm.check)
+        chosen: list = [None] * len(ready)
+        if self.authority:
+            ok = self._admit_reach(ready, cand, chosen)
         else:
             ok = self.tm.admit(_seen_at_entry(self._fleet(with_requests=False), self.families), cand)
-        # nor into a junction token holder's corridor (tm.junctions)
-        ok = self.junctions.admissible(ok, cand.family, cand.centre, cand.heading)
-        # nor onto a walking region a pedestrian can reach
-        ok = self.filters.admissible(ok, entry, lambda: self.tm.claims(cand))
+            # nor into a junction token holder's corridor (tm.junctions)
+            ok = self.junctions.admissible(ok, cand.family, cand.centre, cand.heading)
+            # nor onto a walking region a pedestrian can reach
+            ok = self.filters.admissible(ok, None, lambda: self.tm.claims(cand))
         n = 0
-        for sp, a in zip(ready, ok):
+        for sp, a, st in zip(ready, ok, chosen):
             if a:
-                self._enter(sp, t_s)
+                self._enter(sp, t_s, st)
                 n += 1
         if n:
             keep = [i for i, a in enumerate(ok) if not a] + list(range(n_ready, len(self.pending)))
             self.pending = [self.pending[i] for i in keep]
         return n
 
-    def _enter(self, sp: VehicleSpec, t_s: float) -> None:
-        """Vehicle ``sp`` enters its group at rest on its first waypoint and the world at ``t_s``."""
+    def _admit_reach(self, ready: list, cand: FleetState, chosen: list) -> np.ndarray:
+        """:meth:`_admit` in authority mode: which ready vehicles enter, their starts written to ``chosen``
+        (None: at rest on the first waypoint)."""
+        starts = [self._starts(sp) for sp in ready]
+        # every start's entry claims at once (kept while the vehicle waits): the claims the others
+        # must be checked against are those that may meet any of them
+        rows = [(i, j) for i, st in enumerate(starts) for j in range(len(st))]
+        pick = [i for i, _ in rows]
+        # (a start per row: the rows' ids repeat, so not a FleetState; entry_claims reads these three)
+        sub = SimpleNamespace(family=cand.family[pick], centre=cand.centre[pick], heading=cand.heading[pick]) \
+            if len(rows) > len(ready) else cand
+        specs = [ready[i] for i in pick]
+        claims, index = self.claims.entry_claims(specs, sub, with_index=True,
+                                                 starts=[starts[i][j] for i, j in rows])
+        reach_now, feet_now = self.claims.occupied_parts(self.t, self._fleet(with_requests=False), claims,
+                                                         self._poses)
+        # a vehicle entering at rest must miss the others' footprints now at every step (they may stay);
+        # one entering at speed is elsewhere from the next step on: its footprint now must miss theirs,
+        # its claims from the next step on their claims (which hold where they will be)
+        now = _joined(reach_now, feet_now)
+        moving_claims, feet = reach_now, feet_now
+        ok = np.zeros(len(ready), dtype=bool)
+        at = {key: r for r, key in enumerate(rows)}
+        for j in range(max(len(st) for st in starts)):
+            todo = [i for i in range(len(ready)) if not ok[i] and j < len(starts[i])]
+            if not todo:
+                break
+            sel = np.array([at[(i, j)] for i in todo], dtype=np.intp)
+            e = claims.take(sel)
+            moving = np.array([starts[i][j] is not None and starts[i][j].speed > 0 for i in todo])
+            got = np.zeros(len(todo), dtype=bool)
+            rest = np.flatnonzero(~moving)
+            if len(rest):
+                got[rest] = admit_reach(now, e.take(rest), self.settings.tm.check)
+            mv = np.flatnonzero(moving)
+            f_mv = None
+            if len(mv):
+                f_mv = self._start_footprints([ready[todo[r]] for r in mv], [starts[todo[r]][j] for r in mv])
+                got[mv] = admit_reach(moving_claims, e.take(mv), self.settings.tm.check) & \
+                    admit_reach(feet, f_mv, self.settings.tm.check)
+            # nor into a junction token holder's corridor (tm.junctions): a start further on or at speed
+            # also with the bounding box of its claims
+            shifted = np.array([starts[i][j] is not None for i in todo])
+            box = None
+            if shifted.any():
+                lo, hi = world_aabb(e)
+                box = (np.where(shifted[:, None], lo, np.inf), np.where(shifted[:, None], hi, -np.inf))
+            centre = np.array([self._start_centre(ready[i], starts[i][j]) for i in todo]).reshape(-1, 2)
+            heading = np.array([self._first_heading(ready[i]) if starts[i][j] is None else
+                                float(_headings(np.asarray(ready[i].waypoints))[starts[i][j].k]) for i in todo])
+            got = self.junctions.admissible(got, cand.family[todo], centre, heading, boxes=box)
+            # nor onto a walking region a pedestrian can reach
+            got = self.filters.admissible(got, (e, index[sel]), None)
+            for i, a in zip(todo, got.tolist()):
+                if a:
+                    ok[i], chosen[i] = True, starts[i][j]
+            if got.any():  # the next rounds' starts must miss these too
+                new = e.take(np.flatnonzero(got))
+                now, moving_claims, feet = _joined(now, new), _joined(moving_claims, new), _joined(feet, new)
+                if f_mv is not None and got[mv].any():  # the footprints now of those entering at speed
+                    f_new = f_mv.take(np.flatnonzero(got[mv]))
+                    now, feet = _joined(now, f_new), _joined(feet, f_new)
+        return ok
+
+    def _start_footprints(self, specs: list, starts: list) -> ReachClaims:
+        """The footprints now (one slot) of vehicles entering at ``starts``, padded as their entry claims."""
+        pos = np.array([np.asarray(sp.waypoints[st.k], dtype=float) for sp, st in zip(specs, starts)])
+        hd = np.array([float(_headings(np.asarray(sp.waypoints, dtype=float))[st.k]) for sp, st in zip(specs, starts)])
+        L = np.array([self.classes[sp.vclass].length for sp in specs])
+        Wd = np.array([self.classes[sp.vclass].width for sp in specs])
+        # the padding of waypoint k's claims (its frame) holds SUMO's body about it
+        pads = np.array([self.claims.spec_pads(sp, st.k) for sp, st in zip(specs, starts)]).reshape(len(specs), -1)
+        return footprint_claims(pos, hd, L, Wd, pad=pads)
+
+    def _start_centre(self, sp: VehicleSpec, st: Start | None) -> np.ndarray:
+        return np.asarray(sp.waypoints[0 if st is None else st.k], dtype=float)
+
+    def _starts(self, sp: VehicleSpec) -> list:
+        """The starts admission tries for ``sp`` (:func:`bridge.departure.start_ladder`, the plan's speed
+        capped at its class's and the route's bound there), each with its first stop point and index:
+        ``[None]`` (at rest on its first waypoint) without a plan; a start whose state lies in no tube
+        from a stop point before its first edge's end is left out; the last is always None."""
+        got = self._start_cache.get(sp.id)
+        if got is not None and got[0] is sp:
+            return got[1]
+        out: list = []
+        plan = sp.depart
+        if plan is not None:
+            g = self.groups[sp.vclass]
+            rs = self._route_speeds(sp)
+            K = len(sp.waypoints)
+            top = min(g.vclass.v_max, float(rs.env[min(plan.k + 1, K - 1)]))
+            for k, v in start_ladder(plan, top):
+                if k == 0 and v == 0.0:
+                    continue  # the old start: None, last
+                v = min(v, float(rs.env[min(k + 1, K - 1)]))
+                # its first stop point: the nearest waypoint at least its comfortable braking distance
+                # ahead (as a vehicle cruising at that speed would hold: it need not brake at once)
+                # whose tube holds its state
+                reach = rs.arc[k] + v * v / (2.0 * _look_ahead_decel(g.vclass))
+                ks = np.arange(k, plan.stop_max + 1)
+                ks = ks[rs.arc[ks] >= reach - 1e-9]
+                if not len(ks):
+                    continue
+                cen, hd, _, _ = self.claims.stop_points(sp, ks)
+                X = np.repeat(self.claims.start_x0(sp, k, v)[None], len(ks), axis=0)
+                idx = g.ctl.index(X, cen, hd)
+                inside = np.flatnonzero(idx <= g.ctl.N)
+                if len(inside):
+                    out.append(Start(k, v, int(ks[inside[0]]), int(idx[inside[0]])))
+        out.append(None)
+        self._start_cache[sp.id] = (sp, out)
+        return out
+
+    def _enter(self, sp: VehicleSpec, t_s: float, start: Start | None = None) -> None:
+        """Vehicle ``sp`` enters its group and the world at ``t_s``: at rest on its first waypoint, or at
+        ``start`` (:mod:`bridge.departure`: its centre on waypoint ``start.k`` at ``start.speed``, its
+        first stop point ``start.stop``)."""
         g = self.groups[sp.vclass]
         W = np.asarray(sp.waypoints, dtype=float)
         H = _headings(W)
@@ -642,14 +768,26 @@ class Cosim:
         if self.paths is not None:  # the controller's route: (S_k, 0), heading 0
             world = (W, H)
             W, H = self.paths.waypoints(sp.id, W, rs.arc), np.zeros(len(W))
-        x0 = g.vclass.model.equilibrium(W[0])
-        g.add(sp.id, W, H, x0, int(g.ctl.index(x0[None], W[:1], H[:1])[0]), rs, world=world, k_end=sp.arrive_k)
+        if start is None:
+            x0 = g.vclass.model.equilibrium(W[0])
+            g.add(sp.id, W, H, x0, int(g.ctl.index(x0[None], W[:1], H[:1])[0]), rs, world=world,
+                  k_end=sp.arrive_k)
+        else:
+            x0 = self.claims.start_state(sp, start)[0]
+            c = start.stop
+            l0 = int(g.ctl.index(x0[None], W[c:c + 1], H[c:c + 1])[0])
+            g.add(sp.id, W, H, x0, l0, rs, world=world, k_end=sp.arrive_k, k0=c)
+            rec = self.records[sp.id]  # the route and its free-flow time from where it starts
+            e = sp.arrival_index + 1
+            rec.route_length_m = float(np.linalg.norm(np.diff(sp.driven_waypoints[start.k:], axis=0), axis=1).sum())
+            rec.free_flow_s = free_flow_time(rs.arc[start.k:e], rs.lane[start.k:e], 0.5 * g.vclass.length)
         self.records[sp.id].admitted_s = t_s
+        self._start_cache.pop(sp.id, None)
         if sp.stop_lines is not None:
             reach = self.junctions.classes[sp.vclass].hold + 0.5 * g.vclass.length
             rest_lead = 0.5 * g.vclass.length - g.ctl.settings.standoff if self.authority else None
             self.signal_book.add(sp.id, sp.stop_lines, reach, rest_lead)
-        self.world.insert(sp, g.vclass)
+        self.world.insert(sp, g.vclass, 0 if start is None else start.k)
 
     def _flush(self, g: _Group, mask=None) -> None:
         """Move the group's per-vehicle accumulators (rows ``mask``) into the records."""
@@ -687,6 +825,11 @@ class Cosim:
                     progress(self)
         finally:
             self.flush_records()
+
+
+def _joined(a: ReachClaims, b: ReachClaims) -> ReachClaims:
+    """``a`` then ``b`` (either may be empty)."""
+    return b if not len(a) else a if not len(b) else ReachClaims.concat(a, b)
 
 
 def _seen_at_entry(cur: FleetState | None, families: dict) -> FleetState:

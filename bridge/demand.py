@@ -12,10 +12,16 @@ vehicle at admission.  This module reads route files into that plan:
 * ``<vehicle>`` with ``depart`` (seconds), ``type``, and either
   ``route="id"`` or a nested ``<route edges=...>``; ``departLane`` as a lane
   index (anything else -- ``best``, ``free``, ... -- lets the route choose the
-  lane), ``departPos`` in metres.  Both are kept on the plan but not yet used:
-  :func:`bridge.sumo_world.run_sumo` starts every vehicle with its back at the
-  start of its first edge (SUMO's ``departPos="base"``) on the lane its route
-  chooses.
+  lane; the lane index is kept on the plan but not yet used); ``departPos`` in
+  metres (SUMO's front position on the first lane, negative: from its end) and
+  ``departSpeed`` in m/s, or ``max``, ``desired``, ``speedLimit`` (as fast as the
+  class and the lane allow there: ``inf`` on the plan).  The other keywords
+  (``departPos`` ``random``, ``free``, ``random_free``, ``last``, ``stop``,
+  ``splitFront``; ``departSpeed`` ``random``, ``avg``, ``last``) depend on SUMO's
+  draws or traffic: read from a route file they start the vehicle as SUMO's
+  defaults do (back at the start of the lane, at rest); a ``.sumocfg`` run takes
+  SUMO's own resolution of every form (:func:`bridge.sumo_runs.expand_demand`).
+  :mod:`bridge.departure` turns them into the starts admission tries.
 
 ``<trip>``, ``<flow>``, persons and distributions are refused with a clear
 error: route them into vehicles first (:func:`needs_routing` tells;
@@ -100,10 +106,13 @@ class PlannedVehicle:
     depart_lane : int or None
         Lane index to start on; None lets the route choose.
     depart_pos_m : float or None
-        Start position along the first lane (m); None: its start.
+        SUMO's ``departPos``: the front's position along the first lane (m; negative: from
+        its end); None: SUMO's ``base`` (the back at the lane's start).
     vclass : str
     length, width : float
         Footprint (m), from its vType.
+    depart_speed_mps : float or None
+        SUMO's ``departSpeed`` (m/s; ``inf``: as fast as allowed there); None or 0: at rest.
     """
 
     id: str
@@ -115,6 +124,7 @@ class PlannedVehicle:
     vclass: str
     length: float
     width: float
+    depart_speed_mps: float | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -167,6 +177,46 @@ class DepartureQueue:
     def next_depart_s(self) -> float | None:
         """Planned departure of the next vehicle, or None when all are released."""
         return self._departs[self._next] if self._next < len(self._departs) else None
+
+
+#: departPos / departSpeed keywords SUMO accepts (sumo.dlr.de, Definition of Vehicles): those read as a
+#: start here, and those that depend on SUMO's draws or traffic (then SUMO's defaults: base, at rest)
+DEPART_POS_WORDS = {"base": None, "random": None, "free": None, "random_free": None, "last": None, "stop": None,
+                    "splitFront": None}
+DEPART_SPEED_WORDS = {"max": math.inf, "desired": math.inf, "speedLimit": math.inf, "random": None, "avg": None,
+                      "last": None}
+
+
+def _depart_pos(file: Path, elem: ET.Element) -> float | None:
+    """``departPos``: metres (the front along the first lane; negative: from its end), or a keyword."""
+    raw = elem.get("departPos")
+    if raw is None or raw in DEPART_POS_WORDS:
+        return None
+    try:
+        v = float(raw)
+    except ValueError:
+        v = math.nan
+    if not math.isfinite(v):
+        raise DemandError(f"{file}: <{elem.tag} id={elem.get('id')!r}> departPos={raw!r}: must be a position in "
+                          f"metres or one of {', '.join(DEPART_POS_WORDS)}")
+    return v
+
+
+def _depart_speed(file: Path, elem: ET.Element) -> float | None:
+    """``departSpeed``: m/s >= 0, or a keyword (``inf``: as fast as allowed; None: at rest)."""
+    raw = elem.get("departSpeed")
+    if raw is None:
+        return None
+    if raw in DEPART_SPEED_WORDS:
+        return DEPART_SPEED_WORDS[raw]
+    try:
+        v = float(raw)
+    except ValueError:
+        v = math.nan
+    if not (math.isfinite(v) and v >= 0):
+        raise DemandError(f"{file}: <{elem.tag} id={elem.get('id')!r}> departSpeed={raw!r}: must be a speed "
+                          f"in m/s (>= 0) or one of {', '.join(DEPART_SPEED_WORDS)}")
+    return v
 
 
 def _float(file: Path, elem: ET.Element, attr: str, default: float | None = None) -> float | None:
@@ -301,9 +351,9 @@ def read_demand(route_files: str | os.PathLike | Sequence[str | os.PathLike], *,
         t = types[tid]
         lane_raw = elem.get("departLane")
         lane = int(lane_raw) if lane_raw is not None and lane_raw.isdigit() else None
-        pos = _float(file, elem, "departPos") if (elem.get("departPos") or "").replace(".", "", 1).lstrip(
-            "-").isdigit() else None
-        vehicles.append(PlannedVehicle(elem.get("id"), tid, depart, edges, lane, pos, t.vclass, t.length, t.width))
+        pos, speed = _depart_pos(file, elem), _depart_speed(file, elem)
+        vehicles.append(PlannedVehicle(elem.get("id"), tid, depart, edges, lane, pos, t.vclass, t.length, t.width,
+                                       speed))
     return Demand(tuple(vehicles), types, tuple(files))
 
 

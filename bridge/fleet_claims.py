@@ -84,8 +84,9 @@ class FleetClaims:
         return self.reach is not None
 
     # -------------------------------------------------------------- padding
-    def spec_pads(self, sp) -> np.ndarray:
-        """The claims' footprint padding (4,) of ``sp`` at rest on its first waypoint, preparing the
+    def spec_pads(self, sp, stop: int = 0) -> np.ndarray:
+        """The claims' footprint padding (4,) of ``sp`` at rest on its first waypoint (``stop``: for its
+        claims of waypoint ``stop`` from there, the world's ``entry_pads``), preparing the
         world's padding of its route (``world.register_pads``, SUMO: :mod:`bridge.sumo_body`): how
         far the world's own body reaches beyond the rectangle, for the positions the class's sets
         hold in a waypoint's frame (``T^N``'s projection, cut :data:`~bridge.sumo_body.AHEAD_M`
@@ -105,6 +106,10 @@ class FleetClaims:
             if pads is None:
                 pads = np.zeros(4)
             self._pads[sp.id] = pads
+        if stop:
+            fn = getattr(self.world, "entry_pads", None)
+            got = fn(sp.id, stop) if (self.authority and fn is not None) else None
+            return np.zeros(4) if got is None else got
         return pads
 
     def group_pads(self, g: _Group, offset: int = 0) -> np.ndarray:
@@ -210,46 +215,92 @@ class FleetClaims:
         if self.cache is not None:
             self.cache.commit(go)
 
-    def entry_claims(self, ready: list, cand: FleetState, with_index: bool = False):
+    def entry_claims(self, ready: list, cand: FleetState, with_index: bool = False, starts: list | None = None):
         """Reach claims of the ready vehicles (specs) at rest on their first waypoints (in ``ready``'s
-        order); with ``with_index``: also their membership indices.  A vehicle's entry claims depend on
-        its spec alone (its first waypoints, class and padding at rest there), so they are computed once,
-        at its first admission attempt, and kept while it waits."""
+        order); with ``with_index``: also their membership indices.  ``starts``: per row a
+        :class:`bridge.departure.Start` (another place or a speed, :mod:`bridge.departure`) or None (at
+        rest on the first waypoint).  A vehicle's entry claims depend on its spec and start alone (its
+        waypoints, class and padding there), so they are computed once, at its first admission
+        attempt, and kept while it waits."""
+        starts = [None] * len(ready) if starts is None else list(starts)
         bank = self._entry
-        missing = [i for i, sp in enumerate(ready) if bank[0].get(sp.id, (None, None))[1] is not sp]
+        keys = [(sp.id, st) for sp, st in zip(ready, starts)]
+        missing = [i for i, (sp, key) in enumerate(zip(ready, keys)) if bank[0].get(key, (None, None))[1] is not sp]
         if len(bank[0]) > 4 * len(ready) + 256:  # vehicles admitted long ago: start over
             bank = self._entry = ({}, None, None)
             missing = list(range(len(ready)))
         if missing:
             got, idx = self._entry_fresh([ready[i] for i in missing], cand.family[missing], cand.centre[missing],
-                                         cand.heading[missing])
+                                         cand.heading[missing], [starts[i] for i in missing])
             base = 0 if bank[1] is None else len(bank[1])
             ids = dict(bank[0])
-            ids.update((ready[i].id, (base + r, ready[i])) for r, i in enumerate(missing))
+            ids.update((keys[i], (base + r, ready[i])) for r, i in enumerate(missing))
             bank = self._entry = (ids, got if bank[1] is None else ReachClaims.concat(bank[1], got),
                                   idx if bank[2] is None else np.concatenate([bank[2], idx]))
-        rows = np.fromiter((bank[0][sp.id][0] for sp in ready), dtype=np.intp, count=len(ready))
+        rows = np.fromiter((bank[0][key][0] for key in keys), dtype=np.intp, count=len(ready))
         out = bank[1].take(rows)
         return (out, bank[2][rows]) if with_index else out
 
-    def _entry_fresh(self, ready: list, family: np.ndarray, centre: np.ndarray, heading: np.ndarray):
+    def _entry_fresh(self, ready: list, family: np.ndarray, centre: np.ndarray, heading: np.ndarray,
+                     starts: list):
         """:meth:`entry_claims` computed: ``(claims, indices)`` in ``ready``'s order."""
         parts, rows = [], []
         for c, g in self.groups.items():
             idx = np.flatnonzero(family == c)
             if len(idx):
-                pads = np.array([self.spec_pads(ready[i]) for i in idx]).reshape(len(idx), -1)
+                pads = np.array([self.spec_pads(ready[i], 0 if starts[i] is None else starts[i].stop)
+                                 for i in idx]).reshape(len(idx), -1)
                 if self.paths is None:
-                    cen, hd, place = centre[idx], heading[idx], None
+                    cen, hd, place = centre[idx].copy(), heading[idx].copy(), None
                 else:  # at rest on the start of its path: (0, 0), heading 0
                     cen, hd = np.zeros((len(idx), 2)), np.zeros(len(idx))
                     place = self.paths.entry_place([ready[i] for i in idx], centre[idx], heading[idx])
                 X = self.classes[c].model.equilibrium(cen)
-                parts.append((c, X, cen, hd, g.ctl.index(X, cen, hd), pads, place))
+                index = g.ctl.index(X, cen, hd)
+                moving = [r for r, i in enumerate(idx.tolist()) if starts[i] is not None]
+                for r in moving:  # another start (bridge.departure): its state, first stop point, index
+                    sp, st = ready[idx[r]], starts[idx[r]]
+                    X[r], cen[r], hd[r], w, wh = self.start_state(sp, st)
+                    index[r] = st.index
+                    if place is not None:
+                        place.centre[r], place.heading[r] = w, wh
+                parts.append((c, X, cen, hd, index, pads, place))
                 rows.append(idx)
         inv = np.empty(len(ready), dtype=np.intp)
         inv[np.concatenate(rows)] = np.arange(len(ready))
         return self.reach.claims(parts).take(inv), np.concatenate([p[4] for p in parts])[inv]
+
+    def start_state(self, sp, st):
+        """A start ``st`` (:class:`bridge.departure.Start`) of spec ``sp`` in its plant's frame: ``(x0,
+        centre, heading, world centre, world heading)``, ``x0`` the state on waypoint ``st.k`` at
+        ``st.speed`` along the route, the others of its stop point ``st.stop``."""
+        x0 = self.start_x0(sp, st.k, st.speed)
+        cen, hd, w, wh = self.stop_points(sp, np.array([st.stop]))
+        return x0, cen[0], float(hd[0]), w[0], float(wh[0])
+
+    def start_x0(self, sp, k: int, speed: float) -> np.ndarray:
+        """The plant state (4,) of spec ``sp`` with its centre on waypoint ``k`` at ``speed`` (m/s) along
+        the route (road frame: the segment leaving ``k``)."""
+        W = np.asarray(sp.waypoints, dtype=float)
+        if self.paths is None:
+            d = W[min(k + 1, len(W) - 1)] - W[k] if k + 1 < len(W) else W[k] - W[k - 1]
+            h = float(np.arctan2(d[1], d[0]))
+            return np.array([W[k, 0], W[k, 1], speed * np.cos(h), speed * np.sin(h)])
+        S = self.paths.waypoints(sp.id, W, self._route_arc(sp))[:, 0]
+        return np.array([S[k], 0.0, speed, 0.0])
+
+    def stop_points(self, sp, ks: np.ndarray):
+        """Waypoints ``ks`` of spec ``sp`` as stop points: ``(centre (m, 2), heading (m,))`` in its plant's
+        frame and ``(centre, heading)`` in the world (headings of the segments arriving there)."""
+        from bridge.groups import _headings
+
+        W = np.asarray(sp.waypoints, dtype=float)
+        Hw = _headings(W)
+        ks = np.asarray(ks, dtype=np.intp)
+        if self.paths is None:
+            return W[ks], Hw[ks], W[ks], Hw[ks]
+        S = self.paths.waypoints(sp.id, W, self._route_arc(sp))[:, 0]
+        return np.column_stack([S[ks], np.zeros(len(ks))]), np.zeros(len(ks)), W[ks], Hw[ks]
 
     def occupied(self, t: int, cur: FleetState | None, entry: ReachClaims,
                  poses: Callable[[], tuple[np.ndarray, np.ndarray]]) -> ReachClaims:
@@ -259,10 +310,19 @@ class FleetClaims:
         frame: ``cur``'s headings)."""
         if cur is None:
             return footprint_claims(np.zeros((0, 2)), [], [], [])
+        return ReachClaims.concat(*self.occupied_parts(t, cur, entry, poses))
+
+    def occupied_parts(self, t: int, cur: FleetState | None, entry: ReachClaims,
+                       poses: Callable[[], tuple[np.ndarray, np.ndarray]]) -> tuple[ReachClaims, ReachClaims]:
+        """:meth:`occupied` in its two parts: the reach claims (from the next step on) and the footprints
+        now (one slot: every step)."""
+        if cur is None:
+            empty = footprint_claims(np.zeros((0, 2)), [], [], [])
+            return empty, empty
         now = self.reach_claims(rows=self.near_rows(t, cur.ids, cur.centre, entry))
         pos, body = poses()
         body = cur.heading if self.paths is None else body
-        return ReachClaims.concat(now, footprint_claims(pos, body, cur.length, cur.width, pad=self.fleet_pads()))
+        return now, footprint_claims(pos, body, cur.length, cur.width, pad=self.fleet_pads())
 
     def near_rows(self, t: int, ids: list, centre: np.ndarray, entry: ReachClaims) -> np.ndarray | None:
         """The vehicles (bool, fleet order ``ids``; ``centre`` their current waypoints in the world)

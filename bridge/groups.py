@@ -63,11 +63,12 @@ class _Group:
         self.k_end = np.zeros(0, dtype=np.intp)  # arrival waypoints (K - 1: at rest on the last; see arrived)
         self.binds = np.zeros(0, dtype=bool)     # whether some speed bound of the route lies below v_max
 
-    def add(self, vid, W, H, x0, l0, speeds: RouteSpeeds | None = None, world=None, k_end: int | None = None):
+    def add(self, vid, W, H, x0, l0, speeds: RouteSpeeds | None = None, world=None, k_end: int | None = None,
+            k0: int = 0):
         """Add a vehicle: waypoints ``W`` (K, 2) and headings ``H`` (K,) in the controller's frame,
-        state ``x0``, index ``l0``; ``world``: ``(W, H)`` in the world when the controller's frame
-        is not (a path-frame plant), else the same; ``k_end``: its arrival waypoint
-        (:attr:`bridge.cosim.VehicleSpec.arrive_k`; None: the last, reached at rest)."""
+        state ``x0``, index ``l0`` for its current waypoint ``k0``; ``world``: ``(W, H)`` in the world
+        when the controller's frame is not (a path-frame plant), else the same; ``k_end``: its arrival
+        waypoint (:attr:`bridge.cosim.VehicleSpec.arrive_k`; None: the last, reached at rest)."""
         K = len(W)
         Ww, Hw = (W, H) if world is None else world
         live = int(self.K.sum())
@@ -98,7 +99,7 @@ class _Group:
         self._arc_next += float(arc[-1]) + _ROUTE_GAP_M
         self.ids.append(vid)
         self.X = np.vstack([self.X, x0[None]])
-        self.k = np.append(self.k, 0)
+        self.k = np.append(self.k, int(k0))
         self.l = np.append(self.l, l0)
         self.W.append(np.asarray(Ww, dtype=float))
         self.H.append(np.asarray(Hw, dtype=float))

@@ -110,8 +110,10 @@ def expand_demand(api, errors: tuple, sumocfg: str | os.PathLike, inputs: Prepar
     with ``seed``) and every vehicle is removed the moment SUMO inserts it, so the
     network stays empty and each one departs at its requested time (one SUMO cannot
     insert even then keeps the route it was loaded with).  Recorded per vehicle:
-    id, vType (the one drawn from a distribution), route (as routed by SUMO for trips)
-    and requested departure (``depart - departDelay``).  vTypes are read back with
+    id, vType (the one drawn from a distribution), route (as routed by SUMO for trips),
+    requested departure (``depart - departDelay``), and where and how fast SUMO inserted it
+    (its ``departPos`` and ``departSpeed`` as SUMO resolves them on the empty network: the
+    front's lane position and the speed; None for one not inserted in the window).  vTypes are read back with
     ``vehicletype.get*`` (SUMO's defaults per vClass for what a vType leaves out).
 
     Raises
@@ -145,9 +147,12 @@ def expand_demand(api, errors: tuple, sumocfg: str | os.PathLike, inputs: Prepar
                 if v not in now_departed:
                     seen[v] = [round(now - veh.getDepartDelay(v), 6), veh.getTypeID(v), tuple(veh.getRoute(v)),
                                len(seen)]
-            for v in departed:  # the route as SUMO routed it (trips), then out of the network
+            for v in departed:  # the route as SUMO routed it (trips), where and how fast SUMO inserted
+                # it on the empty network (its departPos / departSpeed resolved: draws, keywords, vType
+                # defaults), then out of the network
                 seen[v] = [round(veh.getDeparture(v) - veh.getDepartDelay(v), 6), veh.getTypeID(v),
-                           tuple(veh.getRoute(v)), seen[v][3] if v in seen else len(seen)]
+                           tuple(veh.getRoute(v)), seen[v][3] if v in seen else len(seen),
+                           float(veh.getLanePosition(v)), float(veh.getSpeed(v))]
                 veh.remove(v, _REMOVE_VAPORIZED)
         vt = mod.vehicletype
         types = {}
@@ -160,11 +165,13 @@ def expand_demand(api, errors: tuple, sumocfg: str | os.PathLike, inputs: Prepar
                                      accel=float(vt.getAccel(tid)), decel=float(vt.getDecel(tid)),
                                      max_speed=vmax)
     vehicles = []
-    for vid, (dep, tid, edges, order) in sorted(seen.items(), key=lambda kv: (kv[1][0], kv[1][3])):
+    for vid, (dep, tid, edges, order, *how) in sorted(seen.items(), key=lambda kv: (kv[1][0], kv[1][3])):
         if not (begin_s - 1e-9 <= dep < end_s - 1e-9):
             continue
         t = types[tid]
-        vehicles.append(PlannedVehicle(vid, tid, float(dep), edges, None, None, t.vclass, t.length, t.width))
+        pos, speed = how if how else (None, None)  # not inserted in the window: SUMO's defaults
+        vehicles.append(PlannedVehicle(vid, tid, float(dep), edges, None, pos, t.vclass, t.length, t.width,
+                                       speed))
     return Demand(tuple(vehicles), types, tuple(Path(p) for p in inputs.expansion_routes))
 
 

@@ -21,6 +21,7 @@ import numpy as np
 
 from controllers.speed_limits import SpeedSettings
 from bridge.cosim import Cosim, CosimSettings, VehicleSpec, Zone
+from bridge.departure import depart_plan, first_edge_end
 from bridge.groups import _headings as spec_headings
 from bridge.pose import front_bumper, sumo_angle
 from analysis.kpis import baseline_vehicle_table, read_tripinfo
@@ -164,6 +165,16 @@ class SumoWorld:
             self.pads_version += 1
         return t.pads(0, t.arc_k[0] - BACK_M)
 
+    def entry_pads(self, vid: str, k: int) -> np.ndarray | None:
+        """The claims' padding (4,) of vehicle ``vid`` (not yet in the network: :meth:`register_pads`
+        done) for its waypoint ``k``, for every position from its first waypoint on (a start further
+        along, :mod:`bridge.departure`: a window from the route's start holds the one from there);
+        None without a table."""
+        t = self._pads.get(vid)
+        if t is None:
+            return None
+        return t.pads(min(int(k), len(t.arc_k) - 1), t.arc_k[0] - BACK_M)
+
     def claim_pads(self, ids, k) -> np.ndarray | None:
         """The claims' padding (n, 4), one-sided (:meth:`bridge.sumo_body.PadTable.pads`), of vehicles
         ``ids`` for their waypoints ``k`` (n,), for the positions still ahead of them (from the
@@ -270,10 +281,11 @@ class SumoWorld:
             return None
         return self._poses(list(ids), np.asarray(centre, dtype=float).reshape(-1, 2))
 
-    def insert(self, spec: VehicleSpec, vclass) -> None:
+    def insert(self, spec: VehicleSpec, vclass, k: int = 0) -> None:
+        """Add ``spec``'s vehicle to SUMO with its centre on waypoint ``k``."""
         pv, r = self.planned[spec.id], self.routes[spec.id]
         self.lengths[spec.id] = pv.length
-        W = np.asarray(spec.waypoints, dtype=float)
+        W = np.asarray(spec.waypoints, dtype=float)[k:]
         if self.net is not None:
             self._sigma.pop(spec.id, None)
             self._poses([spec.id], W[:1])
@@ -609,6 +621,9 @@ def run_sumo(target: str, out: Path, opts, observers_extra: list | None = None) 
                     # past a dead end back onto the lane (measured: a 0.3 m overlap with a close follower)
                     n = max(int(np.sum(arc <= r.length_m - s0)), 2)
                     W, limits, arc = W[:n], limits[:n], arc[:n]
+                edge_end = first_edge_end(r)
+                plan = depart_plan(arc, classes[c].length, edge_end, pv.depart_pos_m, pv.depart_speed_mps,
+                                   first_lane_m=edge_end) if authority else None
                 lines = route_stop_lines(geo, r, arc, slots)
                 if authority and summary["options"]["arrival"] == "pass" and geo.ends_at_boundary(pv.edges[-1]):
                     W, limits, arrive_k = run_out(W, limits, classes[c])
@@ -617,7 +632,7 @@ def run_sumo(target: str, out: Path, opts, observers_extra: list | None = None) 
                 continue
             routes[pv.id] = r
             specs.append(VehicleSpec(id=pv.id, vclass=c, waypoints=W, depart_s=pv.depart_s - begin,
-                                     speed_limits=limits, stop_lines=lines, arrive_k=arrive_k))
+                                     speed_limits=limits, stop_lines=lines, arrive_k=arrive_k, depart=plan))
         summary["vehicles_undrivable"] = len(undrivable)
         world = SumoWorld(adapter, {pv.id: pv for pv in demand.vehicles if pv.id in routes}, routes, slots=slots,
                           net=geo)

@@ -478,12 +478,13 @@ class JunctionGate:
 
     # ------------------------------------------------------------------ admissions
     def admissible(self, ok: np.ndarray, family: np.ndarray, centre: np.ndarray,
-                   heading: np.ndarray) -> np.ndarray:
+                   heading: np.ndarray, boxes: tuple | None = None) -> np.ndarray:
         """``ok`` without the new vehicles whose largest claim (``P^{N-1}`` plus the footprint)
         at their first waypoint ``centre`` would meet a token holder's corridor.
 
         ``family``, ``centre``, ``heading``: class name, first waypoint and first heading of
-        each candidate (rows of ``ok``)."""
+        each candidate (rows of ``ok``); ``boxes``: ``(lo, hi)`` (rows, 2) more boxes each candidate
+        covers (its claims when it starts moving; inverted: none)."""
         ok = np.asarray(ok, dtype=bool)
         held = [c for hs in self.holders for c in hs.values()]
         if not held or not ok.any():
@@ -493,6 +494,8 @@ class JunctionGate:
         q = np.flatnonzero(ok)
         r = np.vstack([self.classes[family[i]].half_extent(heading[i:i + 1]) for i in q.tolist()])
         lo, hi = centre[q] - r, centre[q] + r
+        if boxes is not None:
+            lo, hi = np.minimum(lo, boxes[0][q]), np.maximum(hi, boxes[1][q])
         meet = np.any(np.all((lo[:, None, :] <= h_hi[None]) & (hi[:, None, :] >= h_lo[None]), axis=2), axis=1)
         ok = ok.copy()
         ok[q[meet]] = False

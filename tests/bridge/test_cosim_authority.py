@@ -231,9 +231,10 @@ def test_entry_claims_are_computed_once_per_waiting_vehicle(frame, monkeypatch):
         fresh_rows.extend(sp.id for sp in ready)
         return real_fresh(self, ready, *a)
 
-    def checking(self, ready, cand, with_index=False):
-        got = real_entry(self, ready, cand, with_index)
-        want, idx = real_fresh(self, ready, cand.family, cand.centre, cand.heading)
+    def checking(self, ready, cand, with_index=False, starts=None):
+        got = real_entry(self, ready, cand, with_index, starts)
+        want, idx = real_fresh(self, ready, cand.family, cand.centre, cand.heading,
+                               [None] * len(ready) if starts is None else starts)
         K = want.lo.shape[1]
         assert np.array_equal(got[0].lo[:, :K], want.lo) and np.array_equal(got[0].hi[:, :K], want.hi)
         assert (got[0].lo[:, K:] == got[0].lo[:, K - 1:K]).all()  # padding: the last slot repeated

@@ -1,0 +1,211 @@
+"""SUMO's departPos / departSpeed as muvsim starts (bridge/departure.py): the plans, the ladder of
+starts admission tries, the loop entering vehicles at speed and further along their lane (safety as
+a property), the route files' attributes, and a real SUMO run (``departPos="last"``,
+``departSpeed="max"``, as SUMO's A10KW demo writes them)."""
+
+import json
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from hypothesis import HealthCheck, given, settings, strategies as st
+
+from bridge.cli import main
+from bridge.cosim import Cosim, CosimSettings, VehicleSpec
+from bridge.demand import DemandError, read_demand
+from bridge.departure import DepartPlan, Start, depart_plan, start_ladder
+from bridge.layouts import subsample
+from bridge.scenarios import kpi_tables
+from controllers.classes import builtin_classes
+from tm.settings import TMSettings
+
+CLASSES = builtin_classes()
+
+
+# ----------------------------------------------------------------------------- plans and ladders
+
+def test_depart_plan_position_speed_and_limits():
+    """SUMO's departPos is the front: the centre starts half a length behind it, on the waypoint at or
+    before it; negative counts from the lane's end; the first stop point may not pass the first edge's
+    end; base at rest is no plan."""
+    arc = np.arange(0.0, 301.0, 3.0) + 3.0  # waypoint arcs from the old start (centre 3 m in)
+    plan = depart_plan(arc, 5.0, 200.0, 100.0, math.inf)
+    assert plan.k == int(np.searchsorted(arc, 97.5, side="right")) - 1 and arc[plan.k] <= 97.5 < arc[plan.k + 1]
+    assert plan.speed == math.inf
+    assert arc[plan.stop_max] <= 200.0 - 2.5 < arc[plan.stop_max + 1]
+    tail = depart_plan(arc, 5.0, 200.0, -10.0, None, first_lane_m=200.0)  # 10 m before the lane's end
+    assert arc[tail.k] <= 187.5 < arc[tail.k + 1] and tail.speed == 0.0
+    last = depart_plan(arc, 5.0, 200.0, 1e6, 10.0)  # past the lane: as far as its first stop point may be
+    assert last.k == last.stop_max
+    assert depart_plan(arc, 5.0, 200.0, None, None) is None
+    assert depart_plan(arc, 5.0, 200.0, 2.0, 0.0) is None  # SUMO's base (front at its length): the old start
+    with pytest.raises(ValueError, match="stop_max"):
+        DepartPlan(5, 1.0, 3)
+
+
+def test_start_ladder_order():
+    """Speeds outer (the plan's capped, half, rest), positions inner (the plan's, 2/3, 1/3, the start);
+    repeats dropped; the old start (0, 0) last."""
+    lad = start_ladder(DepartPlan(30, math.inf, 60), 12.0)
+    assert lad[:4] == [(30, 12.0), (20, 12.0), (10, 12.0), (0, 12.0)]
+    assert lad[4:8] == [(30, 6.0), (20, 6.0), (10, 6.0), (0, 6.0)]
+    assert lad[8:] == [(30, 0.0), (20, 0.0), (10, 0.0), (0, 0.0)]
+    assert start_ladder(DepartPlan(0, 8.0, 60), 20.0) == [(0, 8.0), (0, 4.0), (0, 0.0)]
+    assert start_ladder(DepartPlan(9, 0.0, 60), 20.0) == [(9, 0.0), (6, 0.0), (3, 0.0), (0, 0.0)]
+
+
+# ----------------------------------------------------------------------------- the loop (no SUMO)
+
+def _lane(length=600.0):
+    return subsample([[0.0, 0.0], [length, 0.0]], CLASSES["car"].model.delta)
+
+
+def test_vehicle_enters_at_speed_on_its_planned_waypoint():
+    """A car planned at waypoint 40 at full speed enters there at the class's top speed (13.89 m/s),
+    its first stop point at least its comfortable braking distance ahead, the state in that tube;
+    its route length and free-flow time count from there; it keeps cruising."""
+    W = _lane()
+    sp = VehicleSpec("a", "car", W, depart=DepartPlan(40, math.inf, len(W) - 1))
+    sim = Cosim(CLASSES, [sp], CosimSettings(controller="authority"))
+    sim._admit(0.0)
+    g = sim.groups["car"]
+    assert g.ids == ["a"]
+    assert abs(np.hypot(*g.X[0, 2:4]) - 13.89) < 1e-9  # the class's v̄: the plan asked for inf
+    stop = int(g.k[0])
+    braking = 13.89 ** 2 / (2 * CLASSES["car"].comfort_decel)
+    assert W[stop, 0] - W[40, 0] >= braking - 1e-6
+    assert 0 <= int(g.l[0]) <= g.ctl.N
+    rec = sim.records["a"]
+    assert rec.route_length_m == pytest.approx(W[-1, 0] - W[40, 0], abs=1e-9)
+    assert rec.free_flow_s == pytest.approx((W[-1, 0] - W[40, 0]) / 13.89, rel=1e-3)
+    v = []
+    for _ in range(30):
+        sim.step()
+        v.append(float(np.hypot(*g.X[0, 2:4])))
+    assert min(v) > 12.0  # no braking on entry (random disturbances)
+
+
+def test_moving_start_yields_to_a_car_standing_ahead():
+    """A car standing 30 m ahead: the follower's start at full speed would claim through it, so it
+    enters slower or at rest (the ladder), and nothing overlaps; without the stander it enters at
+    full speed."""
+    W = _lane(300.0)
+    stand = VehicleSpec("s", "car", W[:12], depart=DepartPlan(10, 0.0, 11))  # at rest ~30 m in, route ends there
+    go = VehicleSpec("f", "car", W, depart_s=0.1, depart=DepartPlan(0, math.inf, len(W) - 1))
+    sim = Cosim(CLASSES, [stand, go], CosimSettings(controller="authority"))
+    sim._admit(0.0)
+    g = sim.groups["car"]
+    assert g.ids == ["s"]
+    while len(g.ids) < 2:
+        sim.step()
+    assert g.ids == ["s", "f"] and sim.t == 1  # it enters when due, not later
+    assert np.hypot(*g.X[1, 2:4]) < 13.89 - 1e-6
+    sim.run(max_steps=600)
+    figures, _, _ = kpi_tables(sim)
+    assert figures["footprint_overlaps"] == 0 and figures["claim_violations"] == 0
+    alone = Cosim(CLASSES, [go], CosimSettings(controller="authority"))
+    alone._admit(0.1)
+    assert abs(np.hypot(*alone.groups["car"].X[0, 2:4]) - 13.89) < 1e-9
+
+
+@st.composite
+def entering_fleets(draw):
+    seed = draw(st.integers(0, 2**31 - 1))
+    rng = np.random.default_rng(seed)
+    vclass = draw(st.sampled_from(["car", "bus", "truck"]))
+    W = subsample([[0.0, 0.0], [400.0, 0.0]], CLASSES[vclass].model.delta)
+    n = draw(st.integers(2, 6))
+    specs = []
+    for i, t in enumerate(np.sort(rng.uniform(0, 4, n))):
+        k = int(rng.integers(0, 40))
+        speed = float(rng.choice([0.0, rng.uniform(1, 14), math.inf]))
+        plan = DepartPlan(k, speed, len(W) - 1) if (k or speed) else None
+        specs.append(VehicleSpec(f"v{i}", vclass, W, depart_s=float(t), depart=plan))
+    opts = CosimSettings(tm=TMSettings(policy="optimal", check="timed", seed=seed % 1000),
+                         disturbance=draw(st.sampled_from(["random", "adversarial", "none"])), seed=seed % 1000,
+                         controller="authority", frame=draw(st.sampled_from(["path", "road"])))
+    return specs, opts
+
+
+@settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(entering_fleets())
+def test_entering_at_speed_is_safe(fleet):
+    """Random vehicles entering one lane at random places and speeds (some at rest, some as fast as
+    allowed), random and adversarial disturbances, both plant frames: no footprint overlap, claims
+    disjoint after every step, the index invariant, x(t+1) inside S_1(t); every vehicle enters."""
+    specs, opts = fleet
+    sim = Cosim(CLASSES, specs, opts)
+    sim.run(max_steps=700)
+    figures, _, _ = kpi_tables(sim)
+    for key in ("collisions_geometric", "footprint_overlaps", "claim_violations", "invariant_violations",
+                "constraint_violations", "tube_escapes"):
+        assert figures[key] == 0, key
+    assert all(r.admitted_s is not None for r in sim.records.values())
+
+
+# ----------------------------------------------------------------------------- route files
+
+def _routes(tmp_path, attrs: str) -> Path:
+    p = tmp_path / "r.rou.xml"
+    p.write_text(f'<routes><vType id="car" length="5" width="1.8"/>'
+                 f'<vehicle id="v" type="car" depart="0" {attrs}><route edges="a b"/></vehicle></routes>')
+    return p
+
+
+@pytest.mark.parametrize("attrs, pos, speed", [
+    ('departPos="120.5" departSpeed="max"', 120.5, math.inf),
+    ('departPos="-10" departSpeed="7.5"', -10.0, 7.5),
+    ('departPos="last" departSpeed="desired"', None, math.inf),
+    ('departPos="base" departSpeed="random"', None, None),
+    ('', None, None),
+])
+def test_route_file_depart_attributes(tmp_path, attrs, pos, speed):
+    pv = read_demand([_routes(tmp_path, attrs)]).vehicles[0]
+    assert pv.depart_pos_m == pos and pv.depart_speed_mps == speed
+
+
+@pytest.mark.parametrize("attrs, field", [('departSpeed="fast"', "departSpeed"), ('departSpeed="-1"', "departSpeed"),
+                                          ('departPos="middle"', "departPos")])
+def test_route_file_bad_depart_attribute_is_named(tmp_path, attrs, field):
+    with pytest.raises(DemandError, match=rf"r\.rou\.xml.*id='v'.*{field}=.*one of"):
+        read_demand([_routes(tmp_path, attrs)])
+
+
+# ----------------------------------------------------------------------------- real SUMO
+
+ROUTES = """<routes>
+  <vType id="car" length="5" width="1.8"/>
+  <route id="r" edges="A0B0 B0C0"/>
+  <vehicle id="last" type="car" depart="0" route="r" departPos="last" departSpeed="max"/>
+  <vehicle id="base" type="car" depart="0" route="r"/>
+</routes>
+"""
+
+
+def test_sumo_depart_last_at_max_speed(tmp_path):
+    """departPos="last", departSpeed="max" (SUMO's A10KW demo): SUMO's own expansion resolves them
+    (the empty lane's end, the lane's speed), muvsim starts the vehicle as far along at speed as its
+    first stop point allows -- its route much shorter than the one starting at the lane's start at
+    rest, and it arrives first; 0 SUMO collisions."""
+    subprocess.run([str(Path(sys.executable).parent / "netgenerate"), "--grid", "--grid.x-number", "3",
+                    "--grid.y-number", "2", "--grid.length", "300", "--default.lanenumber", "1",
+                    "-o", str(tmp_path / "net.net.xml")], check=True, capture_output=True)
+    (tmp_path / "d.rou.xml").write_text(ROUTES)
+    cfg = tmp_path / "s.sumocfg"
+    cfg.write_text('<configuration><input><net-file value="net.net.xml"/><route-files value="d.rou.xml"/>'
+                   '</input><time><begin value="0"/><end value="60"/></time></configuration>')
+    out = tmp_path / "m"
+    rc = main(["run", str(cfg), "--out", str(out), "--quiet", "--log", "none", "--duration", "50"])
+    s = json.loads((out / "summary.json").read_text())
+    assert rc == 0 and s["complete"], s.get("error")
+    assert s["collisions_sumo"] == 0 and s["collisions_geometric"] == 0 and s["tube_escapes"] == 0
+    v = pd.read_csv(out / "vehicles.csv").set_index("id")
+    # SUMO puts it at the lane's end (300 m); at 13.89 m/s its first stop point must lie a braking
+    # distance ahead and before the junction, so it starts two thirds of the way along (the ladder)
+    assert v.loc["base", "route_length_m"] - v.loc["last", "route_length_m"] > 150.0
+    assert v.loc["last", "arrival_s"] < v.loc["base", "arrival_s"]
+    assert v.loc["last", "mean_speed_mps"] > 11.0  # entered at ~13.89 m/s, not from rest
