@@ -196,9 +196,12 @@ def test_no_granted_claim_contains_a_pedestrian_on_a_crossing(ped_cfg, tmp_path,
     monkeypatch.setattr(sw, "observers_for", lambda *a, **k: real(*a, **k) + [watch])
     s = sw.run_sumo(str(ped_cfg), tmp_path, _opts(pedestrians=mode))
     assert s["complete"] and s["collisions_sumo"] == 0
-    assert s["vehicles_arrived"] > 0 and s["persons_arrived"] > 0
+    assert s["vehicles_arrived"] > 0
     assert watch.checked > 100
     if mode == "guard":
+        # with the rule persons get across; ignoring them, cars entering at the lane's speed (as SUMO
+        # inserts them, bridge/departure.py) leave SUMO's yielding pedestrians no gap in 120 s
+        assert s["persons_arrived"] > 0
         assert watch.inside == 0 and s["pedestrian_conflicts"] == 0 and s["pedestrian_withheld"] > 0
         assert s["safe"]
     else:  # without the rule grants do go over pedestrians on crossings: the check above is not vacuous
@@ -271,7 +274,7 @@ def test_authority_mode_no_granted_reach_claim_contains_a_pedestrian_on_a_crossi
     """--controller authority on the 4-arm junction with personFlows (real SUMO): with the rule no
     granted S_k (k <= max(l, 1)) comes within a body radius of a person on a crossing, 0 SUMO
     collisions, 0 pedestrian_conflicts, requests withheld for pedestrians and still cars and persons
-    arrive; without it grants do cover persons (the check is not vacuous)."""
+    arrive; without it grants do cover persons (the check is not vacuous) and cars arrive."""
     import bridge.sumo_world as sw
     from bridge.sumo_inputs import parse_xml
     from bridge.sumo_pedestrians import _segment_boxes, _shape
@@ -285,9 +288,12 @@ def test_authority_mode_no_granted_reach_claim_contains_a_pedestrian_on_a_crossi
     s = sw.run_sumo(str(ped_cfg), tmp_path, _opts(controller="authority", pedestrians=mode))
     assert s["complete"], s.get("error")
     assert s["collisions_sumo"] == 0
-    assert s["vehicles_arrived"] > 0 and s["persons_arrived"] > 0
+    assert s["vehicles_arrived"] > 0
     assert watch.checked > 100
     if mode == "guard":
+        # with the rule persons get across; ignoring them, cars entering at the lane's speed (as SUMO
+        # inserts them, bridge/departure.py) leave SUMO's yielding pedestrians no gap in 120 s
+        assert s["persons_arrived"] > 0
         assert watch.inside == 0 and s["pedestrian_conflicts"] == 0 and s["pedestrian_withheld"] > 0
         assert s["safe"]
     else:

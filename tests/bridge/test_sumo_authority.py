@@ -40,8 +40,8 @@ def _opts(controller):
 
 def test_queue_on_a_straight_road_authority(road, tmp_path):
     """10 cars departing 1 s apart on a 600 m lane: all arrive, 0 SUMO and geometric collisions,
-    every safety counter 0 (tube escapes included), and their mean speed (route length / travel
-    time, start and stop included) at least 10 m/s -- the paper mode's cap is 5.4 m/s."""
+    every safety counter 0 (tube escapes included), none waits to enter, and their mean speed (route
+    length / travel time, start and stop included) at least 9.5 m/s -- the paper mode's cap is 5.4 m/s."""
     s = run_sumo(str(road), tmp_path / "out", _opts("authority"))
     assert s["complete"], s.get("error")
     assert s["collisions_sumo"] == 0 and s["collisions_geometric"] == 0
@@ -49,7 +49,13 @@ def test_queue_on_a_straight_road_authority(road, tmp_path):
     assert s["tube_escapes"] == 0 and s["claim_violations"] == 0 and s["invariant_violations"] == 0
     assert s["vehicles_arrived"] == N_CARS
     veh = pd.read_csv(tmp_path / "out" / "vehicles.csv")
-    assert veh["mean_speed_mps"].min() >= 10.0
+    # SUMO 1.28 inserts at the lane's speed by default and muvsim starts vehicles as SUMO does
+    # (bridge/departure.py): each follower enters on time, 1 s behind its leader, at the fastest free
+    # speed of the ladder (half), where from rest it waited for its entry to clear (1.1 s more per place
+    # in the queue, not counted in its travel time, which runs from admission): 9.75 m/s measured for
+    # the 10th, which arrives 2.8 s earlier than from rest (11.0 m/s then)
+    assert veh["mean_speed_mps"].min() >= 9.5
+    assert veh["admission_delay_s"].max() < 0.05
     assert json.loads((tmp_path / "out" / "summary.json").read_text())["options"]["controller"] == "authority"
 
 

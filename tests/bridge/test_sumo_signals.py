@@ -179,8 +179,10 @@ def test_game_corridor_holds_only_at_sumos_reds_and_goes_on_green(tmp_path, monk
     assert s["collisions_sumo"] == 0 and s["collisions_geometric"] == 0 and s["invariant_violations"] == 0
 
 
+# departSpeed="0": the timing below is for a car starting at rest (SUMO 1.28 inserts at the lane's
+# speed by default, and muvsim now starts vehicles as SUMO does: bridge/departure.py)
 LONG_ROUTE = """<routes><vType id="car" length="5" width="1.8"/><route id="e" edges="A1B1 B1C1"/>
-  <vehicle id="late" type="car" depart="{depart}" route="e"/></routes>"""
+  <vehicle id="late" type="car" depart="{depart}" route="e" departSpeed="0"/></routes>"""
 
 
 @pytest.fixture(scope="module")
