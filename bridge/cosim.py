@@ -679,9 +679,11 @@ class Cosim:
             mv = np.flatnonzero(moving)
             f_mv = None
             if len(mv):
+                # the round's resting starts taken (before the filters below: more cautious) first
+                taken = e.take(rest[got[rest]]) if got[rest].any() else None
                 f_mv = self._start_footprints([ready[todo[r]] for r in mv], [starts[todo[r]][j] for r in mv])
-                got[mv] = admit_reach(moving_claims, e.take(mv), self.settings.tm.check) & \
-                    admit_reach(feet, f_mv, self.settings.tm.check)
+                got[mv] = admit_reach(_joined(moving_claims, taken), e.take(mv), self.settings.tm.check) & \
+                    admit_reach(_joined(feet, taken), f_mv, self.settings.tm.check)
             # nor into a junction token holder's corridor (tm.junctions): a start further on or at speed
             # also with the bounding box of its claims
             shifted = np.array([starts[i][j] is not None for i in todo])
@@ -827,9 +829,11 @@ class Cosim:
             self.flush_records()
 
 
-def _joined(a: ReachClaims, b: ReachClaims) -> ReachClaims:
-    """``a`` then ``b`` (either may be empty)."""
-    return b if not len(a) else a if not len(b) else ReachClaims.concat(a, b)
+def _joined(a: ReachClaims, b: ReachClaims | None) -> ReachClaims:
+    """``a`` then ``b`` (either may be empty; ``b`` None: ``a``)."""
+    if b is None or not len(b):
+        return a
+    return b if not len(a) else ReachClaims.concat(a, b)
 
 
 def _seen_at_entry(cur: FleetState | None, families: dict) -> FleetState:
@@ -858,7 +862,8 @@ def _used_classes(classes, specs) -> dict:
 def validate_specs(specs, classes: dict, path_frame: bool) -> None:
     """Check every spec before anything runs: waypoints (K >= 2, 2) at most the class's delta apart,
     road-frame routes without turns sharper than the class accepts (``path_frame``: any angle), an
-    arrival waypoint before the last, speed tables of one entry per waypoint, unique ids; a
+    arrival waypoint before the last, speed tables of one entry per waypoint, a departure plan
+    (:mod:`bridge.departure`) whose stop points lie up to the arrival waypoint, unique ids; a
     ValueError names the vehicle and the field."""
     for s in specs:
         W = np.asarray(s.waypoints, dtype=float)
@@ -885,6 +890,10 @@ def validate_specs(specs, classes: dict, path_frame: bool) -> None:
         if s.speed_limits is not None and len(np.asarray(s.speed_limits)) != len(W):
             raise ValueError(f"vehicle {s.id}: speed_limits has {len(np.asarray(s.speed_limits))} "
                              f"entries, one per waypoint ({len(W)}) is needed")
+        last = s.arrival_index
+        if s.depart is not None and not s.depart.stop_max <= last:
+            raise ValueError(f"vehicle {s.id}: depart.stop_max ({s.depart.stop_max}) must be a waypoint up to its "
+                             f"arrival waypoint {last}")
     if len({s.id for s in specs}) != len(specs):
         raise ValueError("vehicle ids must be unique")
 

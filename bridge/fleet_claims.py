@@ -19,7 +19,7 @@ from typing import Callable
 
 import numpy as np
 
-from bridge.groups import _Group, live_groups
+from bridge.groups import _Group, _headings, live_groups
 from bridge.pad_memo import PadMemo
 from bridge.path_fleet import PathFleet
 from controllers.tolerances import GEOMETRY_TOL
@@ -257,8 +257,8 @@ class FleetClaims:
                     place = self.paths.entry_place([ready[i] for i in idx], centre[idx], heading[idx])
                 X = self.classes[c].model.equilibrium(cen)
                 index = g.ctl.index(X, cen, hd)
-                moving = [r for r, i in enumerate(idx.tolist()) if starts[i] is not None]
-                for r in moving:  # another start (bridge.departure): its state, first stop point, index
+                shifted = [r for r, i in enumerate(idx.tolist()) if starts[i] is not None]
+                for r in shifted:  # another start (bridge.departure): its state, first stop point, index
                     sp, st = ready[idx[r]], starts[idx[r]]
                     X[r], cen[r], hd[r], w, wh = self.start_state(sp, st)
                     index[r] = st.index
@@ -292,8 +292,6 @@ class FleetClaims:
     def stop_points(self, sp, ks: np.ndarray):
         """Waypoints ``ks`` of spec ``sp`` as stop points: ``(centre (m, 2), heading (m,))`` in its plant's
         frame and ``(centre, heading)`` in the world (headings of the segments arriving there)."""
-        from bridge.groups import _headings
-
         W = np.asarray(sp.waypoints, dtype=float)
         Hw = _headings(W)
         ks = np.asarray(ks, dtype=np.intp)

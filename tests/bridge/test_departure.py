@@ -112,6 +112,28 @@ def test_moving_start_yields_to_a_car_standing_ahead():
     assert abs(np.hypot(*alone.groups["car"].X[0, 2:4]) - 13.89) < 1e-9
 
 
+def test_a_plan_past_the_route_is_named():
+    W = _lane(60.0)
+    with pytest.raises(ValueError, match=r"vehicle x: depart.stop_max \(40\) must be a waypoint up to its arrival"):
+        Cosim(CLASSES, [VehicleSpec("x", "car", W, depart=DepartPlan(3, 5.0, 40))], CosimSettings(controller="authority"))
+
+
+def test_one_round_never_admits_a_moving_start_beside_a_resting_one():
+    """Two cars due together on one lane, one at rest on the first waypoint (no plan), one planned at
+    speed from the same place: the same admission round tries both starts, and only one enters there
+    (each start is checked against the others admitted in its round, at rest or moving)."""
+    W = _lane(300.0)
+    rest = VehicleSpec("a", "car", W)
+    fast = VehicleSpec("b", "car", W, depart=DepartPlan(0, math.inf, len(W) - 1))
+    sim = Cosim(CLASSES, [rest, fast], CosimSettings(controller="authority"))
+    sim._admit(0.0)
+    assert len(sim.groups["car"].ids) == 1
+    sim.run(max_steps=900)
+    figures, _, _ = kpi_tables(sim)
+    assert figures["footprint_overlaps"] == 0 and figures["claim_violations"] == 0
+    assert all(r.arrived_s is not None for r in sim.records.values())
+
+
 @st.composite
 def entering_fleets(draw):
     seed = draw(st.integers(0, 2**31 - 1))
