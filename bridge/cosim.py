@@ -725,7 +725,8 @@ class Cosim:
         """The starts admission tries for ``sp`` (:func:`bridge.departure.start_ladder`, the plan's speed
         capped at its class's and the route's bound there), each with its first stop point and index:
         ``[None]`` (at rest on its first waypoint) without a plan; a start whose state lies in no tube
-        from a stop point before its first edge's end is left out; the last is always None."""
+        from a stop point before its first edge's end and its first junction guard
+        (:meth:`tm.authority_gate.AuthorityGate.entry_limit`) is left out; the last is always None."""
         got = self._start_cache.get(sp.id)
         if got is not None and got[0] is sp:
             return got[1]
@@ -736,6 +737,11 @@ class Cosim:
             rs = self._route_speeds(sp)
             K = len(sp.waypoints)
             top = min(g.vclass.v_max, float(rs.env[min(plan.k + 1, K - 1)]))
+            # and before its first junction guard (an entry line it may not pass without the token)
+            limit = plan.stop_max
+            if isinstance(self.junctions, AuthorityGate):
+                W = np.asarray(sp.waypoints, dtype=float)
+                limit = min(limit, self.junctions.entry_limit(W, _headings(W), sp.vclass))
             for k, v in start_ladder(plan, top):
                 if k == 0 and v == 0.0:
                     continue  # the old start: None, last
@@ -744,7 +750,7 @@ class Cosim:
                 # ahead (as a vehicle cruising at that speed would hold: it need not brake at once)
                 # whose tube holds its state
                 reach = rs.arc[k] + v * v / (2.0 * _look_ahead_decel(g.vclass))
-                ks = np.arange(k, plan.stop_max + 1)
+                ks = np.arange(k, limit + 1)
                 ks = ks[rs.arc[ks] >= reach - 1e-9]
                 if not len(ks):
                     continue

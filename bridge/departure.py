@@ -7,8 +7,9 @@ longer routes from rest (SUMO's ``A10KW``: ~1.2 km longer) and a 2,500 veh/h flo
 
 A vehicle's :class:`DepartPlan` (built with its spec, :func:`depart_plan`) holds the waypoint SUMO
 would start its centre on, the speed it would have there, and the last waypoint its first stop
-point may be (the front still on the first edge: a vehicle never enters already committed to a
-junction, whose token and signal it has not asked for).  Admission (:class:`bridge.cosim.Cosim`)
+point may be (the front still on the first edge; admission also keeps it before the route's first
+junction guard, :meth:`tm.authority_gate.AuthorityGate.entry_limit`: a vehicle never enters already
+committed to a junction, whose token and signal it has not asked for).  Admission (:class:`bridge.cosim.Cosim`)
 tries the starts of :func:`start_ladder` in order -- the plan's speed, half of it, at rest; at each,
 the plan's position and two thirds and one third of the way back to the lane's start, then the
 start itself -- and takes the first whose claims are free (condition (12)): the last is the old

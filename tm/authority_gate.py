@@ -176,6 +176,19 @@ class AuthorityGate(JunctionGate):
         found = self._spans[vid] = (z[starts], i[starts], np.where(exits, last + 1, len(W) - 1), exits)
         return found
 
+    def entry_limit(self, W: np.ndarray, H: np.ndarray, vclass: str) -> int:
+        """The last waypoint of a route ``W`` (headings ``H``: of the segments arriving at each) before
+        the first of its guard intervals (:meth:`intervals`) that starts after its first waypoint: the
+        furthest stop point a vehicle entering on it may have without a token (bridge/departure.py);
+        its last waypoint when there is none."""
+        W, H = np.asarray(W, dtype=float), np.asarray(H, dtype=float)
+        half = self.classes[vclass].hold_half(H, np.r_[H[1:], H[-1:]])
+        i, _ = self.guards.pairs(W - half, W + half)
+        inside = np.zeros(len(W), dtype=bool)
+        inside[i] = True
+        entries = np.flatnonzero(inside[1:] & ~inside[:-1]) + 1  # runs starting after waypoint 0
+        return int(entries[0]) - 1 if len(entries) else len(W) - 1
+
     def stop_limit(self, fleet: JunctionFleet, row: int) -> int:
         """The furthest waypoint row ``row``'s stop point may reach without a zone token it does not
         hold: one before the first entry beyond its requested stop point ``k + 1`` of an interval

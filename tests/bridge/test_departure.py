@@ -112,6 +112,24 @@ def test_moving_start_yields_to_a_car_standing_ahead():
     assert abs(np.hypot(*alone.groups["car"].X[0, 2:4]) - 13.89) < 1e-9
 
 
+def test_a_moving_start_stops_before_the_first_junction_guard():
+    """A junction 25 m ahead: a car planned at full speed enters with its first stop point before the
+    zone's guard (it holds no token), so slower than the plan when the guard is too near for its
+    braking distance; with the junction 200 m ahead it enters at full speed."""
+    from bridge.cosim import Zone
+
+    W = _lane(300.0)
+    for x, fast in ((25.0, False), (200.0, True)):
+        sp = VehicleSpec("a", "car", W, depart=DepartPlan(0, math.inf, len(W) - 1))
+        sim = Cosim(CLASSES, [sp], CosimSettings(controller="authority"),
+                    zones=[Zone("J", (x, -5.0), (x + 10.0, 5.0))])
+        sim._admit(0.0)
+        g = sim.groups["car"]
+        limit = sim.junctions.entry_limit(W, np.r_[0.0, np.zeros(len(W) - 1)], "car")
+        assert 0 < int(g.k[0]) <= limit < len(W) - 1
+        assert (abs(np.hypot(*g.X[0, 2:4]) - 13.89) < 1e-9) == fast
+
+
 def test_a_plan_past_the_route_is_named():
     W = _lane(60.0)
     with pytest.raises(ValueError, match=r"vehicle x: depart.stop_max \(40\) must be a waypoint up to its arrival"):

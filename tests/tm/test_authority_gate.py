@@ -783,3 +783,20 @@ def test_wide_paths_asked_together_equal_each_asked_alone():
         np.testing.assert_array_equal(got[1], alone[1])
         kept = gate._wide_path(fleet, *ask)
         assert kept[0] is got[0] or np.array_equal(kept[0], got[0])
+
+
+def test_entry_limit_is_the_waypoint_before_the_first_guard_entry():
+    """A vehicle entering on a route (bridge/departure.py) may have its first stop point up to the
+    waypoint before the route's first guard interval: the east-bound route enters at waypoint 20, so
+    19; a route starting inside the guard (its first interval starts at 0) is limited by the next one
+    only; a route meeting no guard by its last waypoint."""
+    gate = AuthorityGate([J], {"car": CAR})
+    W, H = _route(*EAST)
+    assert gate.entry_limit(W, H, "car") == ENTRY - 1
+    W2 = np.vstack([W[ENTRY + 5:], W[-1] + np.array([[1.0, 0.0]])])  # from inside the guard, on east
+    assert gate.entry_limit(W2, np.full(len(W2), 0.0), "car") == len(W2) - 1
+    far, Hf = _route((-80.0, -1.6), (-40.0, -1.6))
+    assert gate.entry_limit(far, Hf, "car") == len(far) - 1
+    two = Zone("K", (45.0, -5.0), (55.0, 5.0))
+    gate2 = AuthorityGate([J, two], {"car": CAR})
+    assert gate2.entry_limit(W2, np.full(len(W2), 0.0), "car") < len(W2) - 1  # K ahead limits it
