@@ -54,7 +54,7 @@ __all__ = ["VEHICLE_COLUMNS", "STEP_COLUMNS", "vehicle_table", "step_table", "pe
 VEHICLE_COLUMNS = ("id", "vclass", "departure_s", "admitted_s", "admission_delay_s", "arrival_s",
                    "travel_time_s", "route_length_m", "free_flow_s", "delay_s", "sumo_time_loss_s", "denials",
                    "stop_episodes", "time_stopped_s", "halt_episodes", "time_halted_s", "mean_speed_mps",
-                   "closest_m", "speed_limit_excess_max")
+                   "closest_m", "speed_limit_excess_max", "depart_speed_mps")
 
 #: A vehicle counts in ``vehicles_over_limit`` when its speed exceeded its lane's limit by more than
 #: this (m/s): the excess the controller cannot prevent, for the urban classes (d̄ = 0.005 in
@@ -79,10 +79,11 @@ def read_tripinfo(path) -> pd.DataFrame:
     -------
     DataFrame
         Columns ``id, vtype, depart_s, requested_depart_s, depart_delay_s, arrival_s, duration_s,
-        route_length_m, time_loss_s, waiting_time_s, waiting_count``; empty when the file has no trip.
+        route_length_m, time_loss_s, waiting_time_s, waiting_count, depart_speed_mps``; empty when the
+        file has no trip.
     """
     cols = ["id", "vtype", "depart_s", "requested_depart_s", "depart_delay_s", "arrival_s", "duration_s",
-            "route_length_m", "time_loss_s", "waiting_time_s", "waiting_count"]
+            "route_length_m", "time_loss_s", "waiting_time_s", "waiting_count", "depart_speed_mps"]
     rows = []
     for t in ET.parse(path).getroot().iter("tripinfo"):
         f = lambda k: float(t.get(k, "nan"))  # noqa: E731
@@ -90,7 +91,7 @@ def read_tripinfo(path) -> pd.DataFrame:
                      "requested_depart_s": f("depart") - f("departDelay"), "depart_delay_s": f("departDelay"),
                      "arrival_s": f("arrival"), "duration_s": f("duration"), "route_length_m": f("routeLength"),
                      "time_loss_s": f("timeLoss"), "waiting_time_s": f("waitingTime"),
-                     "waiting_count": int(t.get("waitingCount", 0))})
+                     "waiting_count": int(t.get("waitingCount", 0)), "depart_speed_mps": f("departSpeed")})
     return pd.DataFrame(rows, columns=cols)
 
 
@@ -135,6 +136,7 @@ def vehicle_table(records, v_max: dict, Ts: float, tripinfo: pd.DataFrame | None
             "mean_speed_mps": float(r.speed_sum) / r.steps if r.steps else np.nan,
             "closest_m": float(r.closest_m),
             "speed_limit_excess_max": max(exc, 0.0) if np.isfinite(exc) else np.nan,
+            "depart_speed_mps": np.nan if r.admitted_s is None else float(getattr(r, "depart_speed_mps", 0.0)),
         })
     df = pd.DataFrame(rows, columns=list(VEHICLE_COLUMNS))
     if tripinfo is not None and len(tripinfo) and len(df):
@@ -176,7 +178,7 @@ def baseline_vehicle_table(tripinfo: pd.DataFrame, v_max: dict, class_of=None) -
         "sumo_time_loss_s": ti["time_loss_s"], "denials": np.nan, "stop_episodes": np.nan,
         "time_stopped_s": np.nan, "halt_episodes": ti["waiting_count"], "time_halted_s": ti["waiting_time_s"],
         "mean_speed_mps": ti["route_length_m"] / ti["duration_s"].where(ti["duration_s"] > 0),
-        "closest_m": np.nan, "speed_limit_excess_max": np.nan,
+        "closest_m": np.nan, "speed_limit_excess_max": np.nan, "depart_speed_mps": ti["depart_speed_mps"],
     }, columns=list(VEHICLE_COLUMNS))
     return df
 

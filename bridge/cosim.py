@@ -199,6 +199,8 @@ class VehicleRecord:
     free_flow_s: float | None = None
     #: largest (speed - lane limit under the front) over the run (m/s); -inf until it drove
     speed_limit_excess: float = -np.inf
+    #: the speed it entered with (m/s; bridge/departure.py: 0 at rest)
+    depart_speed_mps: float = 0.0
 
 
 class Cosim:
@@ -789,6 +791,7 @@ class Cosim:
             e = sp.arrival_index + 1
             rec.route_length_m = float(np.linalg.norm(np.diff(sp.driven_waypoints[start.k:], axis=0), axis=1).sum())
             rec.free_flow_s = free_flow_time(rs.arc[start.k:e], rs.lane[start.k:e], 0.5 * g.vclass.length)
+            rec.depart_speed_mps = float(start.speed)
         self.records[sp.id].admitted_s = t_s
         self._start_cache.pop(sp.id, None)
         if sp.stop_lines is not None:

@@ -249,3 +249,10 @@ def test_sumo_depart_last_at_max_speed(tmp_path):
     assert v.loc["base", "route_length_m"] - v.loc["last", "route_length_m"] > 150.0
     assert v.loc["last", "arrival_s"] < v.loc["base", "arrival_s"]
     assert v.loc["last", "mean_speed_mps"] > 11.0  # entered at ~13.89 m/s, not from rest
+    assert v.loc["last", "depart_speed_mps"] == pytest.approx(13.89, abs=1e-6)
+    # base: SUMO 1.28 inserts at the lane's speed by default too, and the lane before it is free
+    assert v.loc["base", "depart_speed_mps"] > 0.0
+    rc = main(["run", str(cfg), "--out", str(tmp_path / "b"), "--quiet", "--log", "none", "--duration", "50",
+               "--baseline", "sumo"])
+    b = pd.read_csv(tmp_path / "b" / "vehicles.csv").set_index("id")
+    assert rc == 0 and b.loc["last", "depart_speed_mps"] > 10.0  # SUMO's tripinfo departSpeed
