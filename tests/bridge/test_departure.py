@@ -17,7 +17,7 @@ from hypothesis import HealthCheck, given, settings, strategies as st
 from bridge.cli import main
 from bridge.cosim import Cosim, CosimSettings, VehicleSpec
 from bridge.demand import DemandError, read_demand
-from bridge.departure import DepartPlan, Start, depart_plan, start_ladder
+from bridge.departure import DepartPlan, depart_plan, start_ladder
 from bridge.layouts import subsample
 from bridge.scenarios import kpi_tables
 from controllers.classes import builtin_classes
