@@ -612,7 +612,8 @@ class Cosim:
         Authority mode: a vehicle with a departure plan (SUMO's ``departPos`` / ``departSpeed``,
         :mod:`bridge.departure`) has several starts, tried in order: round ``j`` tries the ``j``-th
         start of every vehicle not yet admitted, against the claims of the vehicles in the network
-        and of those admitted in earlier rounds."""
+        and of those admitted in earlier rounds; in a round the resting starts first, then the moving
+        ones against those too (:meth:`_admit_reach`)."""
         n_ready = 0  # pending is sorted by departure: the ready ones are a prefix
         while n_ready < len(self.pending) and self.pending[n_ready].depart_s <= t_s + 1e-9:
             n_ready += 1
