@@ -277,7 +277,7 @@ class Cosim:
         self.monitor = Monitor(settings.tm.check)
         self.pending = sorted(specs, key=lambda s: (s.depart_s, s.id))
         self._heading0: dict[str, float] = {}
-        #: per waiting vehicle: ``(spec, its starts)`` (:meth:`_starts`)
+        #: per waiting vehicle: ``(spec, its starts, their footprints' poses)`` (:meth:`_starts`)
         self._start_cache: dict[str, tuple] = {}
         self.records = {s.id: VehicleRecord(s.id, s.vclass, s.depart_s, s.route_length_m) for s in specs}
         self._speeds = {}
@@ -684,7 +684,7 @@ class Cosim:
             if len(mv):
                 # the round's resting starts taken (before the filters below: more cautious) first
                 taken = e.take(rest[got[rest]]) if got[rest].any() else None
-                f_mv = self._start_footprints([ready[todo[r]] for r in mv], [starts[todo[r]][j] for r in mv])
+                f_mv = self._start_footprints([self._start_pose(ready[todo[r]], j) for r in mv])
                 got[mv] = admit_reach(_joined(moving_claims, taken), e.take(mv), self.settings.tm.check) & \
                     admit_reach(_joined(feet, taken), f_mv, self.settings.tm.check)
             # nor into a junction token holder's corridor (tm.junctions): a start further on or at speed
@@ -694,9 +694,10 @@ class Cosim:
             if shifted.any():
                 lo, hi = world_aabb(e)
                 box = (np.where(shifted[:, None], lo, np.inf), np.where(shifted[:, None], hi, -np.inf))
-            centre = np.array([self._start_centre(ready[i], starts[i][j]) for i in todo]).reshape(-1, 2)
-            heading = np.array([self._first_heading(ready[i]) if starts[i][j] is None else
-                                float(_headings(np.asarray(ready[i].waypoints))[starts[i][j].k]) for i in todo])
+            poses = [(cand.centre[i], cand.heading[i]) if starts[i][j] is None else self._start_pose(ready[i], j)[:2]
+                     for i in todo]
+            centre = np.array([p[0] for p in poses]).reshape(-1, 2)
+            heading = np.array([p[1] for p in poses], dtype=float)
             got = self.junctions.admissible(got, cand.family[todo], centre, heading, boxes=box)
             # nor onto a walking region a pedestrian can reach
             got = self.filters.admissible(got, (e, index[sel]), None)
@@ -711,18 +712,18 @@ class Cosim:
                     now, feet = _joined(now, f_new), _joined(feet, f_new)
         return ok
 
-    def _start_footprints(self, specs: list, starts: list) -> ReachClaims:
-        """The footprints now (one slot) of vehicles entering at ``starts``, padded as their entry claims."""
-        pos = np.array([np.asarray(sp.waypoints[st.k], dtype=float) for sp, st in zip(specs, starts)])
-        hd = np.array([float(_headings(np.asarray(sp.waypoints, dtype=float))[st.k]) for sp, st in zip(specs, starts)])
-        L = np.array([self.classes[sp.vclass].length for sp in specs])
-        Wd = np.array([self.classes[sp.vclass].width for sp in specs])
-        # the padding of waypoint k's claims (its frame) holds SUMO's body about it
-        pads = np.array([self.claims.spec_pads(sp, st.k) for sp, st in zip(specs, starts)]).reshape(len(specs), -1)
-        return footprint_claims(pos, hd, L, Wd, pad=pads)
+    @staticmethod
+    def _start_footprints(poses: list) -> ReachClaims:
+        """The footprints now (one slot) of vehicles entering at starts with poses ``poses``
+        (:meth:`_start_pose`), padded as their entry claims."""
+        pos, hd, L, Wd, pads = (np.array(a, dtype=float) for a in zip(*poses))
+        return footprint_claims(pos.reshape(-1, 2), hd, L, Wd, pad=pads.reshape(len(poses), -1))
 
-    def _start_centre(self, sp: VehicleSpec, st: Start | None) -> np.ndarray:
-        return np.asarray(sp.waypoints[0 if st is None else st.k], dtype=float)
+    def _start_pose(self, sp: VehicleSpec, j: int) -> tuple:
+        """Start ``j`` (moving or shifted, :meth:`_starts`) of ``sp``: ``(centre, heading, length, width,
+        pads)`` of its footprint now (the waypoint ``k``, the heading of the segment arriving there, the
+        padding of waypoint ``k``'s claims: SUMO's body about it), computed with the starts."""
+        return self._start_cache[sp.id][2][j]
 
     def _starts(self, sp: VehicleSpec) -> list:
         """The starts admission tries for ``sp`` (:func:`bridge.departure.start_ladder`, the plan's speed
@@ -739,12 +740,13 @@ class Cosim:
             g = self.groups[sp.vclass]
             rs = self._route_speeds(sp)
             K = len(sp.waypoints)
+            W = np.asarray(sp.waypoints, dtype=float)
+            Hw = _headings(W)
             top = min(g.vclass.v_max, float(rs.env[min(plan.k + 1, K - 1)]))
             # and before its first junction guard (an entry line it may not pass without the token)
             limit = plan.stop_max
             if isinstance(self.junctions, AuthorityGate):
-                W = np.asarray(sp.waypoints, dtype=float)
-                limit = min(limit, self.junctions.entry_limit(W, _headings(W), sp.vclass))
+                limit = min(limit, self.junctions.entry_limit(W, Hw, sp.vclass))
             for k, v in start_ladder(plan, top):
                 if k == 0 and v == 0.0:
                     continue  # the old start: None, last
@@ -763,8 +765,10 @@ class Cosim:
                 inside = np.flatnonzero(idx <= g.ctl.N)
                 if len(inside):
                     out.append(Start(k, v, int(ks[inside[0]]), int(idx[inside[0]])))
+        vc = self.classes[sp.vclass]
+        poses = [(W[st.k], float(Hw[st.k]), vc.length, vc.width, self.claims.spec_pads(sp, st.k)) for st in out]
         out.append(None)
-        self._start_cache[sp.id] = (sp, out)
+        self._start_cache[sp.id] = (sp, out, poses)
         return out
 
     def _enter(self, sp: VehicleSpec, t_s: float, start: Start | None = None) -> None:
@@ -783,11 +787,9 @@ class Cosim:
             x0 = g.vclass.model.equilibrium(W[0])
             g.add(sp.id, W, H, x0, int(g.ctl.index(x0[None], W[:1], H[:1])[0]), rs, world=world,
                   k_end=sp.arrive_k)
-        else:
-            x0 = self.claims.start_state(sp, start)[0]
-            c = start.stop
-            l0 = int(g.ctl.index(x0[None], W[c:c + 1], H[c:c + 1])[0])
-            g.add(sp.id, W, H, x0, l0, rs, world=world, k_end=sp.arrive_k, k0=c)
+        else:  # its state, first stop point and index there, as admission took them (_starts)
+            x0 = self.claims.start_x0(sp, start.k, start.speed)
+            g.add(sp.id, W, H, x0, start.index, rs, world=world, k_end=sp.arrive_k, k0=start.stop)
             rec = self.records[sp.id]  # the route and its free-flow time from where it starts
             e = sp.arrival_index + 1
             rec.route_length_m = float(np.linalg.norm(np.diff(sp.driven_waypoints[start.k:], axis=0), axis=1).sum())

@@ -181,8 +181,7 @@ class DepartureQueue:
 
 #: departPos / departSpeed keywords SUMO accepts (sumo.dlr.de, Definition of Vehicles): those read as a
 #: start here, and those that depend on SUMO's draws or traffic (then SUMO's defaults: base, at rest)
-DEPART_POS_WORDS = {"base": None, "random": None, "free": None, "random_free": None, "last": None, "stop": None,
-                    "splitFront": None}
+DEPART_POS_WORDS = ("base", "random", "free", "random_free", "last", "stop", "splitFront")
 DEPART_SPEED_WORDS = {"max": math.inf, "desired": math.inf, "speedLimit": math.inf, "random": None, "avg": None,
                       "last": None}
 

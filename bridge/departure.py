@@ -14,9 +14,9 @@ tries the starts of :func:`start_ladder` in order -- the plan's speed, half of i
 the plan's position and two thirds and one third of the way back to the lane's start, then the
 start itself -- and takes the first whose claims are free (condition (12)): the last is the old
 start (at rest, ``base``), so a vehicle enters at least as early as before.  A moving start's
-first stop point is the nearest waypoint from which its state lies in the tube
-(``x0 ∈ T^l(c)``, ``l <= N``): its claims reach a braking distance ahead, and the traffic manager
-extends them as for any other vehicle.  This is SUMO's own rule for ``departSpeed="max"`` (the
+first stop point is the nearest waypoint at least its comfortable braking distance ahead from which
+its state lies in the tube (``x0 ∈ T^l(c)``, ``l <= N``): it need not brake at once, and the
+traffic manager extends its claims as for any other vehicle.  This is SUMO's own rule for ``departSpeed="max"`` (the
 fastest safe speed) and ``departPos="free"``/``"last"`` (a free place on the lane); for a number
 SUMO waits instead of starting slower or further back.
 """

@@ -300,20 +300,12 @@ class FleetClaims:
         S = self.paths.waypoints(sp.id, W, self._route_arc(sp))[:, 0]
         return np.column_stack([S[ks], np.zeros(len(ks))]), np.zeros(len(ks)), W[ks], Hw[ks]
 
-    def occupied(self, t: int, cur: FleetState | None, entry: ReachClaims,
-                 poses: Callable[[], tuple[np.ndarray, np.ndarray]]) -> ReachClaims:
-        """Authority mode: what the entry claims ``entry`` of step ``t`` must miss (condition (12)): the
-        reach claims of the vehicles ``cur`` (None: none) whose claims may meet them (:meth:`near_rows`)
-        and every vehicle's footprint now, padded (``poses()``: their centres and body headings; road
-        frame: ``cur``'s headings)."""
-        if cur is None:
-            return footprint_claims(np.zeros((0, 2)), [], [], [])
-        return ReachClaims.concat(*self.occupied_parts(t, cur, entry, poses))
-
     def occupied_parts(self, t: int, cur: FleetState | None, entry: ReachClaims,
                        poses: Callable[[], tuple[np.ndarray, np.ndarray]]) -> tuple[ReachClaims, ReachClaims]:
-        """:meth:`occupied` in its two parts: the reach claims (from the next step on) and the footprints
-        now (one slot: every step)."""
+        """Authority mode: what the entry claims ``entry`` of step ``t`` must miss (condition (12)), in two
+        parts: the reach claims (from the next step on) of the vehicles ``cur`` (None: none) whose
+        claims may meet them (:meth:`near_rows`), and every vehicle's footprint now, padded (one slot:
+        every step; ``poses()``: their centres and body headings; road frame: ``cur``'s headings)."""
         if cur is None:
             empty = footprint_claims(np.zeros((0, 2)), [], [], [])
             return empty, empty

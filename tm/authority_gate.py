@@ -164,9 +164,7 @@ class AuthorityGate(JunctionGate):
         if found is not None:
             return found
         W, H, _ = fleet.route(row)
-        c = fleet.family[row]
-        half = self.classes[c].hold_half(H, np.r_[H[1:], H[-1:]])  # the shared guard: every class's reach
-        i, z = self.guards.pairs(W - half, W + half)
+        i, z = self._guard_hits(W, H, fleet.family[row])
         o = np.lexsort((i, z))
         i, z = i[o], z[o]
         run = np.r_[True, (z[1:] != z[:-1]) | (i[1:] != i[:-1] + 1)] if len(i) else np.zeros(0, dtype=bool)
@@ -176,14 +174,20 @@ class AuthorityGate(JunctionGate):
         found = self._spans[vid] = (z[starts], i[starts], np.where(exits, last + 1, len(W) - 1), exits)
         return found
 
+    def _guard_hits(self, W: np.ndarray, H: np.ndarray, vclass: str) -> tuple[np.ndarray, np.ndarray]:
+        """``(waypoint, zone)`` pairs of a route ``W`` (headings ``H``) whose hold box (``T^0 ⊕
+        footprint`` at the arriving and leaving headings) meets a zone's shared guard (the largest
+        class's: no holder's claims stick out of the zone further, module notes)."""
+        half = self.classes[vclass].hold_half(H, np.r_[H[1:], H[-1:]])
+        return self.guards.pairs(W - half, W + half)
+
     def entry_limit(self, W: np.ndarray, H: np.ndarray, vclass: str) -> int:
         """The last waypoint of a route ``W`` (headings ``H``: of the segments arriving at each) before
         the first of its guard intervals (:meth:`intervals`) that starts after its first waypoint: the
         furthest stop point a vehicle entering on it may have without a token (bridge/departure.py);
         its last waypoint when there is none."""
         W, H = np.asarray(W, dtype=float), np.asarray(H, dtype=float)
-        half = self.classes[vclass].hold_half(H, np.r_[H[1:], H[-1:]])
-        i, _ = self.guards.pairs(W - half, W + half)
+        i, _ = self._guard_hits(W, H, vclass)
         inside = np.zeros(len(W), dtype=bool)
         inside[i] = True
         entries = np.flatnonzero(inside[1:] & ~inside[:-1]) + 1  # runs starting after waypoint 0
