@@ -163,7 +163,7 @@ class SumoWorld:
             self._j0.pop(spec.id, None)
             self._pad_rows.pop(spec.id, None)
             self.pads_version += 1
-        return t.pads(0, t.arc_k[0] - BACK_M)
+        return self.entry_pads(spec.id, 0)
 
     def entry_pads(self, vid: str, k: int) -> np.ndarray | None:
         """The claims' padding (4,) of vehicle ``vid`` (not yet in the network: :meth:`register_pads`
@@ -621,9 +621,11 @@ def run_sumo(target: str, out: Path, opts, observers_extra: list | None = None) 
                     # past a dead end back onto the lane (measured: a 0.3 m overlap with a close follower)
                     n = max(int(np.sum(arc <= r.length_m - s0)), 2)
                     W, limits, arc = W[:n], limits[:n], arc[:n]
-                edge_end = first_edge_end(r)
-                plan = depart_plan(arc, classes[c].length, edge_end, pv.depart_pos_m, pv.depart_speed_mps,
-                                   first_lane_m=edge_end) if authority else None
+                plan = None
+                if authority:
+                    edge_end = first_edge_end(r)
+                    plan = depart_plan(arc, classes[c].length, edge_end, pv.depart_pos_m, pv.depart_speed_mps,
+                                       first_lane_m=edge_end)
                 lines = route_stop_lines(geo, r, arc, slots)
                 if authority and summary["options"]["arrival"] == "pass" and geo.ends_at_boundary(pv.edges[-1]):
                     W, limits, arrive_k = run_out(W, limits, classes[c])
