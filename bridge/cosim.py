@@ -85,6 +85,9 @@ class VehicleSpec:
     #: where and how fast SUMO would start it (its departPos / departSpeed, :mod:`bridge.departure`):
     #: admission tries that start first; None: at rest on its first waypoint (authority mode only)
     depart: DepartPlan | None = None
+    #: waypoints on the internal lanes of a straight connection (SUMO's direction ``s``), bool (K,):
+    #: no curve speed from their shape there (:func:`controllers.speed_limits.route_speeds`); None: none
+    straight: np.ndarray | None = None
 
     @property
     def arrival_index(self) -> int:
@@ -325,7 +328,8 @@ class Cosim:
             vc, sp = self.classes[spec.vclass], self.settings.speed
             try:
                 rs = route_speeds(spec.waypoints, spec.speed_limits, vc.v_max, _look_ahead_decel(vc),
-                                  self._lat_accel, sp.curve_window_m, apply_lanes=sp.lane_limits)
+                                  self._lat_accel, sp.curve_window_m, apply_lanes=sp.lane_limits,
+                                  straight=spec.straight)
             except ValueError as exc:
                 raise ValueError(f"vehicle {spec.id}: {exc}") from None
             self._speeds[spec.id] = rs

@@ -613,6 +613,7 @@ def run_sumo(target: str, out: Path, opts, observers_extra: list | None = None) 
                 _check_drivable(pv.id, W, classes[c])
                 kept = trim_start_index(r, s0)
                 limits = geo.speed_limits(r)[kept]
+                straight = geo.straight_through(r)[kept]
                 arc = r.arc_length[kept].astype(float)
                 arc[0] = min(max(s0, 0.0), 0.5 * r.length_m)  # trim_start's first point
                 arrive_k = None
@@ -620,7 +621,7 @@ def run_sumo(target: str, out: Path, opts, observers_extra: list | None = None) 
                     # stop with the whole body on the last lane: SUMO clamps a front bumper pushed
                     # past a dead end back onto the lane (measured: a 0.3 m overlap with a close follower)
                     n = max(int(np.sum(arc <= r.length_m - s0)), 2)
-                    W, limits, arc = W[:n], limits[:n], arc[:n]
+                    W, limits, arc, straight = W[:n], limits[:n], arc[:n], straight[:n]
                 plan = None
                 if authority:
                     edge_end = first_edge_end(r)
@@ -629,12 +630,14 @@ def run_sumo(target: str, out: Path, opts, observers_extra: list | None = None) 
                 lines = route_stop_lines(geo, r, arc, slots)
                 if authority and summary["options"]["arrival"] == "pass" and geo.ends_at_boundary(pv.edges[-1]):
                     W, limits, arrive_k = run_out(W, limits, classes[c])
+                    straight = np.concatenate([straight, np.zeros(len(W) - len(straight), dtype=bool)])
             except RouteError as exc:  # one vehicle never ends the run: reported, the rest run
                 undrivable[pv.id] = (pv, str(exc))
                 continue
             routes[pv.id] = r
             specs.append(VehicleSpec(id=pv.id, vclass=c, waypoints=W, depart_s=pv.depart_s - begin,
-                                     speed_limits=limits, stop_lines=lines, arrive_k=arrive_k, depart=plan))
+                                     speed_limits=limits, stop_lines=lines, arrive_k=arrive_k, depart=plan,
+                                     straight=straight if straight.any() else None))
         summary["vehicles_undrivable"] = len(undrivable)
         world = SumoWorld(adapter, {pv.id: pv for pv in demand.vehicles if pv.id in routes}, routes, slots=slots,
                           net=geo)

@@ -145,8 +145,12 @@ class RouteSpeeds:
     env: np.ndarray
 
 
-def curvature(W: np.ndarray, window_m: float) -> np.ndarray:
-    """Curvature (1/m, >= 0) of the polyline ``W`` (K, 2) at each waypoint over ``[s - w, s + w]``."""
+def curvature(W: np.ndarray, window_m: float, straight: np.ndarray | None = None) -> np.ndarray:
+    """Curvature (1/m, >= 0) of the polyline ``W`` (K, 2) at each waypoint over ``[s - w, s + w]``.
+
+    ``straight`` (K,) bool: waypoints on a straight connection (see :func:`route_speeds`); the
+    heading changes at a segment touching one (either end waypoint) are left out, so the turns of
+    such a connection's shape, and its kinks where it meets the lanes, count as no curve."""
     W = np.asarray(W, dtype=float)
     d = np.diff(W, axis=0)
     seg = np.linalg.norm(d, axis=1)
@@ -160,12 +164,25 @@ def curvature(W: np.ndarray, window_m: float) -> np.ndarray:
     lo = np.clip(arc - window_m, 0.0, arc[-1])
     hi = np.clip(arc + window_m, 0.0, arc[-1])
     turn = np.abs(np.interp(hi, mid, h) - np.interp(lo, mid, h))
+    if straight is not None and np.any(straight):
+        st = np.asarray(straight, dtype=bool)
+        on = st[:-1] | st[1:]  # segment j (W[j] -> W[j+1]) touches a straight connection
+        dh = np.diff(h)  # the turn between segments j and j+1, over [mid_j, mid_{j+1}]
+        cut = (on[:-1] | on[1:]) & (dh != 0.0)
+        if cut.any():  # only the windows that see a cut turn change (elsewhere: bit for bit as before)
+            h_eff = h[0] + np.concatenate([[0.0], np.cumsum(np.where(cut, 0.0, dh))])
+            turn_eff = np.abs(np.interp(hi, mid, h_eff) - np.interp(lo, mid, h_eff))
+            sees = np.zeros(len(W), dtype=bool)
+            for a, b in zip(mid[:-1][cut], mid[1:][cut]):
+                sees |= (lo < b) & (hi > a)
+            turn = np.where(sees, turn_eff, turn)
     span = np.maximum(hi - lo, 1e-9)
     return turn / span
 
 
 def route_speeds(W: np.ndarray, limits: np.ndarray | None, v_max: float, decel: float,
-                 lat_accel: float | None = None, window_m: float = 4.0, apply_lanes: bool = True) -> RouteSpeeds:
+                 lat_accel: float | None = None, window_m: float = 4.0, apply_lanes: bool = True,
+                 straight: np.ndarray | None = None) -> RouteSpeeds:
     """The tables of one route.
 
     Parameters
@@ -185,6 +202,12 @@ def route_speeds(W: np.ndarray, limits: np.ndarray | None, v_max: float, decel: 
     apply_lanes : bool
         Whether ``bound`` holds the lane limits (``lane`` always does: the KPI measures against
         them even when the controller ignores them).
+    straight : ndarray of bool, shape (K,), optional
+        Waypoints on the internal lanes of a straight connection (SUMO's direction ``s``): no
+        curve speed from their shape (:func:`curvature`).  SUMO's drivers keep the lane's speed
+        through them (netconvert lowers only turning connections' speeds): a node where a road's
+        lane count changes bends its lanes sideways by a lane width over a few metres, and the
+        curve speed there was ~5 m/s on a 13.89 m/s road (SUMO's ``cross`` demo).
 
     Raises
     ------
@@ -212,7 +235,9 @@ def route_speeds(W: np.ndarray, limits: np.ndarray | None, v_max: float, decel: 
     lane[0] = lane[1]
     bound = lane.copy() if apply_lanes else np.full(K, float(v_max))
     if lat_accel is not None:
-        kap = curvature(W, window_m)
+        if straight is not None and np.shape(straight) != (K,):
+            raise ValueError(f"straight: expected one flag per waypoint ({K},), got shape {np.shape(straight)}")
+        kap = curvature(W, window_m, straight)
         with np.errstate(divide="ignore"):
             vc = np.where(kap > 0, np.sqrt(lat_accel / np.maximum(kap, 1e-300)), np.inf)
         bound[1:] = np.minimum(bound[1:], np.minimum(vc[:-1], vc[1:]))

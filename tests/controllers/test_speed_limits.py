@@ -104,6 +104,42 @@ def test_curvature_and_curve_speed_of_a_circle():
     assert np.all(curvature(S, 4.0) == 0.0)
 
 
+def _s_bend_then_turn():
+    """A straight, an S-bend shifting 2.6 m sideways over ~8 m (SUMO's ``cross`` demo, node ``m3``:
+    the lanes of a straight connection), a straight, then a 90 degree turn of R = 20 m: waypoints
+    and which lie on the S-bend."""
+    a = np.column_stack([np.arange(0.0, 30.0, 3.0), np.zeros(10)])
+    s_bend = np.array([[30.0, 0.0], [32.5, 0.3], [34.1, 1.3], [35.7, 2.3], [38.2, 2.6]])
+    b = np.column_stack([np.arange(41.2, 80.0, 3.0), np.full(13, 2.6)])
+    t = np.linspace(0.0, np.pi / 2, 12)[1:]
+    turn = np.column_stack([b[-1, 0] + 20.0 * np.sin(t), 2.6 + 20.0 * (1.0 - np.cos(t))])
+    W = np.vstack([a, s_bend, b, turn])
+    straight = np.zeros(len(W), dtype=bool)
+    straight[len(a):len(a) + len(s_bend)] = True
+    return W, straight
+
+
+def test_a_straight_connection_has_no_curve_speed_and_a_turn_keeps_its_own():
+    """The S-bend of a straight connection: ~5 m/s as a curve (the speed ``cross``'s cars crawled
+    at through every lane-count node); flagged straight, the lane's 13.89 m/s all along it, while
+    the turn later on the same route keeps its curve speed exactly (sqrt(a_lat R) within 2.5 %, as
+    the circle alone) and a route without flags is unchanged bit for bit."""
+    W, straight = _s_bend_then_turn()
+    lim = np.full(len(W), 13.89)
+    plain = route_speeds(W, lim, 13.89, 2.5, lat_accel=2.0)
+    free = route_speeds(W, lim, 13.89, 2.5, lat_accel=2.0, straight=straight)
+    near = slice(7, 18)  # the S-bend and 4 m on either side
+    assert plain.bound[near].min() < 6.0
+    assert np.all(free.bound[near] == 13.89)
+    turn = slice(len(W) - 8, len(W) - 3)
+    assert np.array_equal(free.bound[turn], plain.bound[turn])
+    assert np.all(np.abs(free.bound[turn] / np.sqrt(2.0 * 20.0) - 1.0) < 0.025)
+    none = route_speeds(W, lim, 13.89, 2.5, lat_accel=2.0, straight=np.zeros(len(W), dtype=bool))
+    assert np.array_equal(none.bound, plain.bound) and np.array_equal(none.env, plain.env)
+    with pytest.raises(ValueError, match="one flag per waypoint"):
+        route_speeds(W, lim, 13.89, 2.5, lat_accel=2.0, straight=straight[:-1])
+
+
 def test_settings_and_bad_limits_are_refused():
     with pytest.raises(SettingsError, match="lat_accel"):
         SpeedSettings(lat_accel=0.0)
