@@ -846,10 +846,8 @@ class Cosim:
 
 
 def _joined(a: ReachClaims, b: ReachClaims | None) -> ReachClaims:
-    """``a`` then ``b`` (either may be empty; ``b`` None: ``a``)."""
-    if b is None or not len(b):
-        return a
-    return b if not len(a) else ReachClaims.concat(a, b)
+    """``a`` then ``b`` (``b`` None: ``a``)."""
+    return a if b is None else ReachClaims.concat(a, b)
 
 
 def _seen_at_entry(cur: FleetState | None, families: dict) -> FleetState:

@@ -45,8 +45,9 @@ class SlotBoxes:
         (n, K, 2) in those frames (empty where ``lo > hi``)."""
         lo, hi = np.asarray(lo, dtype=float), np.asarray(hi, dtype=float)
         n, K = lo.shape[:2]
-        C = np.broadcast_to(np.asarray(centre, dtype=float).reshape(n, -1, 2), (n, K, 2))
-        H = np.broadcast_to(np.asarray(heading, dtype=float).reshape(n, -1), (n, K))
+        per = 1 if not n else -1  # (an empty set: nothing to infer the slot axis from)
+        C = np.broadcast_to(np.asarray(centre, dtype=float).reshape(n, per, 2), (n, K, 2))
+        H = np.broadcast_to(np.asarray(heading, dtype=float).reshape(n, per), (n, K))
         ok = (lo[..., 0] <= hi[..., 0]) & (lo[..., 1] <= hi[..., 1])
         m = np.flatnonzero(ok.ravel())
         L, U = lo.reshape(-1, 2)[m], hi.reshape(-1, 2)[m]

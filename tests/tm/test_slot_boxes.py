@@ -103,3 +103,24 @@ def test_from_frames_one_box_per_non_empty_slot():
     assert sb.count.tolist() == [[1, 0]]
     np.testing.assert_allclose(sb.centre[0], [10.0 - 0.5, 0.0], atol=1e-12)  # (0, 0.5) turned by 90 deg
     np.testing.assert_allclose(sb.half[0], [1.0, 1.5])
+
+
+def test_claims_concatenate_with_an_empty_part():
+    """Reach claims with slot-box unions (path-frame vehicles) concatenated with an empty set (no
+    vehicle in the network, or none admitted this round): the other part, unchanged -- from_frames
+    refused an empty set (its slot axis cannot be inferred from zero rows), so every caller had to
+    skip empty parts itself."""
+    from tm.reach import ReachClaims
+
+    empty = SlotBoxes.from_frames(np.zeros((0, 2)), np.zeros(0), np.zeros((0, 3, 2)), np.zeros((0, 3, 2)))
+    assert empty.count.shape == (0, 3) and len(empty.centre) == 0
+    lo = np.array([[[-1.0, -1.0], [0.0, -1.0], [1.0, -1.0]]])
+    hi = lo + 2.0
+    tight = SlotBoxes.from_frames(np.array([[5.0, 1.0]]), np.array([0.3]), lo, hi)
+    one = ReachClaims(np.array([[5.0, 1.0]]), np.array([0.3]), lo, hi, tight)
+    none = ReachClaims(np.zeros((0, 2)), np.zeros(0), np.zeros((0, 3, 2)), np.zeros((0, 3, 2)))
+    for both in (ReachClaims.concat(none, one), ReachClaims.concat(one, none)):
+        assert len(both) == 1
+        np.testing.assert_array_equal(both.lo, one.lo)
+        np.testing.assert_array_equal(both.slot_boxes, one.slot_boxes)
+        np.testing.assert_array_equal(both.slot_union().count, tight.count)
