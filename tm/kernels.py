@@ -230,11 +230,13 @@ def grid_pairs(x0, x1, y0, y1, mask, use_mask):
     it covers, pairs are formed within each cell (with a mask, only those with a masked box: those
     come first in a cell) and kept only in the cell holding the corner
     ``max(lo_i, lo_j)`` of their intersection, so each is reported once.  Boxes must not be
-    inverted (``x1 >= x0``, ``y1 >= y0``)."""
+    inverted (``x1 >= x0``, ``y1 >= y0``).  The entries are ordered by cell with a counting sort
+    when the grid has at most about twice as many cells as entries (else a sort), and copied in
+    that order to contiguous arrays before the pairs of each cell are formed."""
     n = len(x0)
     ox, oy = x0.min(), y0.min()
     ext = np.maximum(x1 - x0, y1 - y0)
-    h = max(np.sort(ext)[n // 2], 1e-6)
+    h = max(np.partition(ext, n // 2)[n // 2], 1e-6)
     span = max(x1.max() - ox, y1.max() - oy)
     cx0 = np.empty(n, dtype=np.int64)
     cy0 = np.empty(n, dtype=np.int64)
@@ -272,28 +274,51 @@ def grid_pairs(x0, x1, y0, y1, mask, use_mask):
         for e in range(total):
             late[e] = 0 if mask[box[e]] else 1
     sub = cell * 2 + late
-    if sub.max() < (1 << 62) // total:  # sort packed (cell, late, entry): much faster than argsort
+    n_sub = sub.max() + 1
+    if n_sub <= 4 * total + 64:  # counting sort by (cell, late), entries in order within one
+        first = np.zeros(n_sub + 1, dtype=np.int64)
+        for e in range(total):
+            first[sub[e] + 1] += 1
+        for u in range(n_sub):
+            first[u + 1] += first[u]
+        order = np.empty(total, dtype=np.int64)
+        for e in range(total):
+            order[first[sub[e]]] = e
+            first[sub[e]] += 1
+    elif n_sub <= (1 << 62) // total:  # sort packed (cell, late, entry): much faster than argsort
         order = np.sort(sub * total + np.arange(total)) % total
     else:
         order = np.argsort(sub, kind="mergesort")
+    # the entries in that order, contiguous: a cell's pairs read its boxes' bounds side by side
+    ex0 = np.empty(total)
+    ex1 = np.empty(total)
+    ey0 = np.empty(total)
+    ey1 = np.empty(total)
+    eb = np.empty(total, dtype=np.int64)
+    ec = np.empty(total, dtype=np.int64)
+    for g in range(total):
+        b = box[order[g]]
+        ex0[g], ex1[g], ey0[g], ey1[g], eb[g], ec[g] = x0[b], x1[b], y0[b], y1[b], b, cell[order[g]]
     cap = max(16, 4 * n)
     key = np.empty(cap, dtype=np.int64)
     m = 0
     g = 0
     while g < total:
-        c = cell[order[g]]
+        c = ec[g]
         end = g + 1
-        while end < total and cell[order[end]] == c:
+        while end < total and ec[end] == c:
             end += 1
-        for a in range(g, end):
-            p = box[order[a]]
-            if use_mask and not mask[p]:
-                break  # it and every entry after it unmasked
+        last = end  # pairs start at a masked entry: those before the cell's first unmasked one
+        if use_mask:
+            last = g
+            while last < end and mask[eb[last]]:
+                last += 1
+        for a in range(g, last):
+            ax0, ax1, ay0, ay1 = ex0[a], ex1[a], ey0[a], ey1[a]
             for b in range(a + 1, end):
-                q = box[order[b]]
-                cx = max(x0[p], x0[q])
-                cy = max(y0[p], y0[q])
-                if not (min(x1[p], x1[q]) >= cx and min(y1[p], y1[q]) >= cy):
+                cx = max(ax0, ex0[b])
+                cy = max(ay0, ey0[b])
+                if not (min(ax1, ex1[b]) >= cx and min(ay1, ey1[b]) >= cy):
                     continue
                 if np.int64(np.floor((cx - ox) * inv)) * width + np.int64(np.floor((cy - oy) * inv)) != c:
                     continue
@@ -301,6 +326,7 @@ def grid_pairs(x0, x1, y0, y1, mask, use_mask):
                     grown = np.empty(2 * cap, dtype=np.int64)
                     grown[:cap] = key
                     key, cap = grown, 2 * cap
+                p, q = eb[a], eb[b]
                 key[m] = min(p, q) * n + max(p, q)
                 m += 1
         g = end
