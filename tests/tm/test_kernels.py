@@ -163,6 +163,21 @@ def test_timed_check_sees_both_answers():
     assert 0 < got.sum() < len(got)
 
 
+@pytest.mark.parametrize("K", [1, 2, 5, 17])
+def test_timed_check_with_equal_horizons_equals_every_slot_by_numpy(K):
+    """Equal horizons (the kernel's pass over every slot's pre-filter first): the reference's answer,
+    on pairs that pass no pre-filter, pass one but no separating-axis test, and meet."""
+    rng = np.random.default_rng(K)
+    a, b = _random_claims(rng, 40, K, False), _random_claims(rng, 30, K, False)
+    i, j = np.divmod(np.arange(40 * 30), 30)                       # every pair
+    got = claims_conflict(a, i, b, j, "timed")
+    assert np.array_equal(got, _ref_timed(a, i, b, j, GEOMETRY_TOL))
+    A, B, pad = a.slot_boxes, b.slot_boxes, PREFILTER_TOL_FACTOR * GEOMETRY_TOL
+    passed = ((A[0][i] <= B[1][j] + pad) & (B[0][j] <= A[1][i] + pad) &
+              (A[2][i] <= B[3][j] + pad) & (B[2][j] <= A[3][i] + pad)).any(axis=1)
+    assert got.any() and (~passed).any() and (passed & ~got).any()
+
+
 @pytest.fixture(scope="module")
 def bus_model(shared_set_cache):
     return lane_class(get_class("bus"), SynthesisSettings(cache_dir=shared_set_cache)).reach
