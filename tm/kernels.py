@@ -181,28 +181,46 @@ def reach_boxes(E, index, ly, Aa, Ac, ra, ry, v_lo_t, v_hi_t, p_lo_t, p_hi_t, y_
     n = E.shape[0]
     K_out = lo.shape[1]
     inf = np.inf
+    g_v = np.empty(K)
+    h_v = np.empty(K)
     for v in range(n):
         r = row0 + v
         e0, e1, e2, e3 = E[v, 0], E[v, 1], E[v, 2], E[v, 3]
+        iv, lyv = index[v], ly[v]
+        # the tables first, in a loop of their own: its few operations per slot let many of these
+        # scattered loads be in flight at once (within the slot loop below they were its main cost)
+        for s in range(K - 1):
+            mm = _max(iv - (s + 1), 0)
+            cv = e0 * Aa[s, 1, 0] + e2 * Aa[s, 1, 1]
+            vl = _max(cv - ra[s, 1], v_lo_t[mm])
+            vh = _min(cv + ra[s, 1], v_hi_t[mm])
+            h_v[s] = _table(H, mm, vh + margin, w0, dw, False)
+            g_v[s] = _table(G, mm, vl - margin, w0, dw, True)
+        fxl, fxh, fyl, fyh = fx_lo[v], fx_hi[v], fy_lo[v], fy_hi[v]
+        c, sn = cos_h[v], sin_h[v]
+        ac, as_ = abs(c), abs(sn)
+        c0, c1 = centre[v, 0], centre[v, 1]
+        u0, u1, u2, u3 = inf, -inf, inf, -inf
         for s in range(K_out):
             if s >= K:  # T^0 whole again: slot K - 1's boxes (the same floats)
-                lo[r, s, 0], lo[r, s, 1], hi[r, s, 0], hi[r, s, 1] = lo[r, K - 1, 0], lo[r, K - 1, 1], \
-                    hi[r, K - 1, 0], hi[r, K - 1, 1]
+                b0, b1, b2, b3 = lo[r, K - 1, 0], lo[r, K - 1, 1], hi[r, K - 1, 0], hi[r, K - 1, 1]
+                lo[r, s, 0], lo[r, s, 1], hi[r, s, 0], hi[r, s, 1] = b0, b1, b2, b3
                 if with_boxes:
-                    W[0, r, s], W[1, r, s], W[2, r, s], W[3, r, s] = W[0, r, K - 1], W[1, r, K - 1], \
-                        W[2, r, K - 1], W[3, r, K - 1]
+                    w_0, w_1, w_2, w_3 = W[0, r, K - 1], W[1, r, K - 1], W[2, r, K - 1], W[3, r, K - 1]
+                    W[0, r, s], W[1, r, s], W[2, r, s], W[3, r, s] = w_0, w_1, w_2, w_3
+                    u0 = _min(u0, w_0)
+                    u1 = _max(u1, w_1)
+                    u2 = _min(u2, w_2)
+                    u3 = _max(u3, w_3)
                 continue
             if s < K - 1:
                 k = s + 1
-                mm = _max(index[v] - k, 0)
-                my = _max(ly[v] - k, 0)
+                mm = _max(iv - k, 0)
+                my = _max(lyv - k, 0)
                 cp = e0 * Aa[s, 0, 0] + e2 * Aa[s, 0, 1]
-                cv = e0 * Aa[s, 1, 0] + e2 * Aa[s, 1, 1]
                 cy = e1 * Ac[s, 0, 0] + e3 * Ac[s, 0, 1]
-                vl = _max(cv - ra[s, 1], v_lo_t[mm])
-                vh = _min(cv + ra[s, 1], v_hi_t[mm])
-                a0 = _max(_max(cp - ra[s, 0], _table(H, mm, vh + margin, w0, dw, False)), p_lo_t[mm])
-                a1 = _min(_min(cp + ra[s, 0], _table(G, mm, vl - margin, w0, dw, True)), p_hi_t[mm])
+                a0 = _max(_max(cp - ra[s, 0], h_v[s]), p_lo_t[mm])
+                a1 = _min(_min(cp + ra[s, 0], g_v[s]), p_hi_t[mm])
                 a2 = _max(cy - ry[s, 0], y_lo_t[my])
                 a3 = _min(cy + ry[s, 0], y_hi_t[my])
             else:  # the last slot: T^0 whole
@@ -211,32 +229,35 @@ def reach_boxes(E, index, ly, Aa, Ac, ra, ry, v_lo_t, v_hi_t, p_lo_t, p_hi_t, y_
             if empty:
                 a0, a1, a2, a3 = inf, -inf, inf, -inf
             else:
-                a0 = a0 - fx_lo[v]
-                a1 = a1 + fx_hi[v]
-                a2 = a2 - fy_lo[v]
-                a3 = a3 + fy_hi[v]
+                a0 = a0 - fxl
+                a1 = a1 + fxh
+                a2 = a2 - fyl
+                a3 = a3 + fyh
             lo[r, s, 0], lo[r, s, 1], hi[r, s, 0], hi[r, s, 1] = a0, a2, a1, a3
             if not with_boxes:
                 continue
             hx = (a1 - a0) * 0.5
             hy = (a3 - a2) * 0.5
             if empty or not (hx >= 0 and hy >= 0):
-                W[0, r, s], W[1, r, s], W[2, r, s], W[3, r, s] = inf, -inf, inf, -inf
-                continue
-            c, sn = cos_h[v], sin_h[v]
-            ac, as_ = abs(c), abs(sn)
-            mx = (a0 + a1) * 0.5
-            my_ = (a2 + a3) * 0.5
-            wx = c * mx - sn * my_ + centre[v, 0]
-            wy = sn * mx + c * my_ + centre[v, 1]
-            ex = ac * hx + as_ * hy
-            ey = as_ * hx + ac * hy
-            W[0, r, s] = wx - ex
-            W[1, r, s] = wx + ex
-            W[2, r, s] = wy - ey
-            W[3, r, s] = wy + ey
+                w_0, w_1, w_2, w_3 = inf, -inf, inf, -inf
+            else:
+                mx = (a0 + a1) * 0.5
+                my_ = (a2 + a3) * 0.5
+                wx = c * mx - sn * my_ + c0
+                wy = sn * mx + c * my_ + c1
+                ex = ac * hx + as_ * hy
+                ey = as_ * hx + ac * hy
+                w_0, w_1, w_2, w_3 = wx - ex, wx + ex, wy - ey, wy + ey
+            W[0, r, s], W[1, r, s], W[2, r, s], W[3, r, s] = w_0, w_1, w_2, w_3
+            if s == 0:  # the bounds over the row's slots: _row_bounds' min / max, in its order
+                u0, u1, u2, u3 = w_0, w_1, w_2, w_3
+            else:
+                u0 = _min(u0, w_0)
+                u1 = _max(u1, w_1)
+                u2 = _min(u2, w_2)
+                u3 = _max(u3, w_3)
         if with_boxes:
-            _row_bounds(W, r, U)
+            U[r, 0], U[r, 1], U[r, 2], U[r, 3] = u0, u1, u2, u3
 
 
 @njit(cache=True)
