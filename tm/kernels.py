@@ -24,7 +24,7 @@ import numpy as np
 from numba import njit
 
 __all__ = ["timed_pairs_plain", "timed_pairs_tight", "reach_boxes", "grid_pairs", "union_bounds", "slot_bounds", "path_slots",
-           "cover_boxes", "cover_frame_bounds", "best_assignments"]
+           "cover_boxes", "cover_frame_bounds", "best_assignments", "stop_closure", "min_labels"]
 
 
 @njit(cache=True, inline="always")
@@ -555,3 +555,60 @@ def best_assignments(start, size, nodes, e_ptr, e_a, e_b, e_excl, w, go):
                 best, best_a = score, a
         for j in range(s):
             go[nodes[s0 + j]] = ((best_a >> j) & 1) == 1
+
+
+@njit(cache=True)
+def stop_closure(stopped, a, b):
+    """:func:`tm.selection.propagate_stops`: the least superset of the stop mask ``stopped`` (n,) closed
+    under ``g_a <= g_b`` for every edge (``a[e]`` stops when ``b[e]`` does), by a search from the
+    stopped requesters along the edges reversed (the closure is unique: any order gives it)."""
+    n, m = len(stopped), len(a)
+    out = stopped.copy()
+    first = np.zeros(n + 1, dtype=np.int64)  # edges grouped by b: the a's that wait on each b
+    for e in range(m):
+        first[b[e] + 1] += 1
+    for v in range(n):
+        first[v + 1] += first[v]
+    fill = first[:n].copy()
+    waits = np.empty(m, dtype=np.int64)
+    for e in range(m):
+        waits[fill[b[e]]] = a[e]
+        fill[b[e]] += 1
+    todo = np.empty(n, dtype=np.int64)
+    top = 0
+    for v in range(n):
+        if out[v]:
+            todo[top] = v
+            top += 1
+    while top:
+        top -= 1
+        v = todo[top]
+        for x in range(first[v], first[v + 1]):
+            u = waits[x]
+            if not out[u]:
+                out[u] = True
+                todo[top] = u
+                top += 1
+    return out
+
+
+@njit(cache=True)
+def min_labels(n, a, b):
+    """:func:`tm.selection.components`: per node the smallest node of its connected component (edges
+    ``(a[e], b[e])``), by union-find whose root is always its set's smallest node."""
+    parent = np.arange(n)
+    for e in range(len(a)):
+        x, y = a[e], b[e]
+        while parent[x] != x:
+            parent[x] = parent[parent[x]]
+            x = parent[x]
+        while parent[y] != y:
+            parent[y] = parent[parent[y]]
+            y = parent[y]
+        if x < y:
+            parent[y] = x
+        elif y < x:
+            parent[x] = y
+    for v in range(n):
+        parent[v] = parent[parent[v]]  # roots come first in node order: every chain is now flat
+    return parent

@@ -20,7 +20,7 @@ import numpy as np
 from scipy.optimize import Bounds, LinearConstraint, milp
 from scipy.sparse import coo_matrix
 
-from tm.kernels import best_assignments
+from tm.kernels import best_assignments, min_labels, stop_closure
 
 __all__ = ["feasible", "select_greedy", "select_optimal", "propagate_stops", "components"]
 
@@ -69,35 +69,20 @@ def select_greedy(n: int, fixed_hits, leq, excl, rng: np.random.Generator) -> np
 
 
 def propagate_stops(stopped, leq) -> np.ndarray:
-    """Close a stop mask under ``g_i <= g_j``: if ``j`` stops, ``i`` must stop."""
+    """Close a stop mask under ``g_i <= g_j``: if ``j`` stops, ``i`` must stop (compiled,
+    :func:`tm.kernels.stop_closure`)."""
     stopped = np.array(stopped, dtype=bool)
     leq = _edges(leq)
-    while True:
-        add = stopped[leq[:, 1]] & ~stopped[leq[:, 0]]
-        if not add.any():
-            return stopped
-        stopped[leq[add, 0]] = True
+    return stop_closure(stopped, np.ascontiguousarray(leq[:, 0]), np.ascontiguousarray(leq[:, 1]))
 
 
 def components(n: int, edges) -> np.ndarray:
-    """Connected-component labels of an undirected graph on ``n`` nodes (vectorised).
-
-    Min-label propagation over the edges with pointer jumping; each label is
-    the smallest node of its component.  (scipy's ``connected_components``
-    costs ~0.3 ms of overhead per call here, more than a whole decision.)
+    """Connected-component labels of an undirected graph on ``n`` nodes: each label is the
+    smallest node of its component (compiled union-find, :func:`tm.kernels.min_labels`; scipy's
+    ``connected_components`` costs ~0.3 ms of overhead per call here).
     """
     edges = _edges(edges)
-    label = np.arange(n)
-    a, b = edges[:, 0], edges[:, 1]
-    while True:
-        m = np.minimum(label[a], label[b])
-        new = label.copy()
-        np.minimum.at(new, a, m)
-        np.minimum.at(new, b, m)
-        new = new[new]
-        if np.array_equal(new, label):
-            return label
-        label = new
+    return min_labels(n, np.ascontiguousarray(edges[:, 0]), np.ascontiguousarray(edges[:, 1]))
 
 
 def _milp(n: int, leq: np.ndarray, excl: np.ndarray, w: np.ndarray, time_limit: float):

@@ -77,6 +77,25 @@ def test_forced_stops_propagate_through_hold_regions():
     assert go.tolist() == [False, False, False, True]
 
 
+@settings(max_examples=60, deadline=None)
+@given(st.integers(1, 40), st.integers(0, 2**32 - 1), st.floats(0, 0.3), st.floats(0, 0.5))
+def test_stop_closure_is_the_fixed_point(n, seed, density, p_stop):
+    """Random g_i <= g_j edges (cycles and repeated edges included): the closure is the fixed point of
+    "j stopped, so i stops" applied to all edges until nothing changes."""
+    rng = np.random.default_rng(seed)
+    leq = rng.integers(0, n, size=(int(density * n * n), 2))
+    start = rng.random(n) < p_stop
+    before, want = start.copy(), start.copy()
+    while True:
+        add = want[leq[:, 1]] & ~want[leq[:, 0]]
+        if not add.any():
+            break
+        want[leq[add, 0]] = True
+    got = propagate_stops(start, leq)
+    assert got.dtype == bool and np.array_equal(got, want)
+    assert np.array_equal(start, before)                                 # the input is not changed
+
+
 def test_same_rng_seed_same_tie_breaks():
     excl = np.array([[i, j] for i in range(6) for j in range(i + 1, 6)])    # a clique: one goes
     runs = [select_optimal(6, np.zeros(6, int), np.zeros((0, 2), int), excl, np.ones(6, int),
