@@ -24,7 +24,8 @@ import numpy as np
 from numba import njit
 
 __all__ = ["timed_pairs_plain", "timed_pairs_tight", "reach_boxes", "grid_pairs", "union_bounds", "slot_bounds", "path_slots",
-           "cover_boxes", "cover_frame_bounds", "best_assignments", "stop_closure", "min_labels"]
+           "cover_boxes", "cover_frame_bounds", "best_assignments", "stop_closure", "min_labels",
+           "greedy_tables", "greedy_stops"]
 
 
 @njit(cache=True, inline="always")
@@ -612,3 +613,62 @@ def min_labels(n, a, b):
     for v in range(n):
         parent[v] = parent[parent[v]]  # roots come first in node order: every chain is now flat
     return parent
+
+
+@njit(cache=True)
+def _incident(n, a, b):
+    """Rows ``(a[e], b[e])`` grouped by ``b``: ``first`` (n + 1,), ``other`` the ``a`` of each."""
+    first = np.zeros(n + 1, dtype=np.int64)
+    for e in range(len(a)):
+        first[b[e] + 1] += 1
+    for v in range(n):
+        first[v + 1] += first[v]
+    fill = first[:n].copy()
+    other = np.empty(len(a), dtype=np.int64)
+    for e in range(len(a)):
+        other[fill[b[e]]] = a[e]
+        fill[b[e]] += 1
+    return first, other
+
+
+@njit(cache=True)
+def greedy_tables(n, ex_a, ex_b, lq_a, lq_b):
+    """The edges of :func:`greedy_stops` grouped by requester: exclusions ``(x, p)`` by ``p`` and
+    ``(p, x)`` by ``p``, and rows ``g_i <= g_p`` by ``p`` (``first`` (n + 1,), ``other`` pairs)."""
+    f1, o1 = _incident(n, ex_a, ex_b)
+    f2, o2 = _incident(n, ex_b, ex_a)
+    f3, o3 = _incident(n, lq_a, lq_b)
+    return f1, o1, f2, o2, f3, o3
+
+
+@njit(cache=True)
+def greedy_stops(deg, stopped, ex_f1, ex_o1, ex_f2, ex_o2, lq_f, lq_o, pick):
+    """The stop loop of :func:`tm.selection.select_greedy` with the active degrees ``deg`` (n,) kept
+    up to date instead of recounted: stopping ``p`` takes one from the other end of each of ``p``'s
+    exclusions still active, adds one to each requester ``i`` outside the stop set with a row
+    ``g_i <= g_p``, and zeroes ``p``'s (the same integers as the recount).  Stops ``pick`` first
+    (-1: none), then the requester of highest degree while it is alone; returns the tied
+    requesters, ascending, when there are several (the caller draws the next ``pick`` among them),
+    an empty array when the highest degree is 0.  Edges: :func:`greedy_tables`."""
+    n = len(deg)
+    while True:
+        if pick >= 0:
+            p = pick
+            stopped[p] = True
+            for x in range(ex_f1[p], ex_f1[p + 1]):  # rows (x, p)
+                if not stopped[ex_o1[x]]:
+                    deg[ex_o1[x]] -= 1
+            for x in range(ex_f2[p], ex_f2[p + 1]):  # rows (p, x)
+                if not stopped[ex_o2[x]]:
+                    deg[ex_o2[x]] -= 1
+            for x in range(lq_f[p], lq_f[p + 1]):    # rows g_i <= g_p
+                if not stopped[lq_o[x]]:
+                    deg[lq_o[x]] += 1
+            deg[p] = 0
+        best = deg.max() if n else 0
+        if best == 0:
+            return np.empty(0, dtype=np.int64)
+        ties = np.flatnonzero(deg == best)
+        if len(ties) > 1:
+            return ties
+        pick = ties[0]

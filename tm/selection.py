@@ -20,7 +20,7 @@ import numpy as np
 from scipy.optimize import Bounds, LinearConstraint, milp
 from scipy.sparse import coo_matrix
 
-from tm.kernels import best_assignments, min_labels, stop_closure
+from tm.kernels import best_assignments, greedy_stops, greedy_tables, min_labels, stop_closure
 
 __all__ = ["feasible", "select_greedy", "select_optimal", "propagate_stops", "components"]
 
@@ -56,16 +56,17 @@ def select_greedy(n: int, fixed_hits, leq, excl, rng: np.random.Generator) -> np
     fixed_hits = np.asarray(fixed_hits, dtype=np.intp)
     leq, excl = _edges(leq), _edges(excl)
     stopped = np.zeros(n, dtype=bool)
+    # the active degrees with nobody stopped; then kept up to date as requesters stop (compiled,
+    # tm.kernels.greedy_stops), the random draws here: one per tie, as the recount per stop did
+    deg = (fixed_hits + np.bincount(excl.ravel(), minlength=n)).astype(np.int64)
+    col = lambda a, k: np.ascontiguousarray(a[:, k], dtype=np.int64)  # noqa: E731
+    tables = greedy_tables(n, col(excl, 0), col(excl, 1), col(leq, 0), col(leq, 1))
+    pick = -1
     while True:
-        ex = excl[~stopped[excl[:, 0]] & ~stopped[excl[:, 1]]]
-        lq = leq[~stopped[leq[:, 0]] & stopped[leq[:, 1]]]
-        deg = np.where(stopped, 0, fixed_hits) \
-            + np.bincount(ex.ravel(), minlength=n) + np.bincount(lq[:, 0], minlength=n)
-        best = deg.max() if n else 0
-        if best == 0:
+        ties = greedy_stops(deg, stopped, *tables, pick)
+        if not len(ties):
             return ~stopped
-        ties = np.flatnonzero(deg == best)
-        stopped[ties[rng.integers(len(ties))] if len(ties) > 1 else ties[0]] = True
+        pick = ties[rng.integers(len(ties))]
 
 
 def propagate_stops(stopped, leq) -> np.ndarray:
