@@ -355,20 +355,21 @@ def grid_pairs(x0, x1, y0, y1, mask, use_mask):
                 last += 1
         for a in range(g, last):
             ax0, ax1, ay0, ay1 = ex0[a], ex1[a], ey0[a], ey1[a]
-            for b in range(a + 1, end):
+            if m + (end - a) > cap:  # room for every pair of this entry: the loop below writes each
+                while m + (end - a) > cap:
+                    cap *= 2
+                grown = np.empty(cap, dtype=np.int64)
+                grown[:m] = key[:m]
+                key = grown
+            p = eb[a]
+            for b in range(a + 1, end):  # branch-free: each key written, kept (m + 1) when it counts
                 cx = max(ax0, ex0[b])
                 cy = max(ay0, ey0[b])
-                if not (min(ax1, ex1[b]) >= cx and min(ay1, ey1[b]) >= cy):
-                    continue
-                if np.int64(np.floor((cx - ox) * inv)) * width + np.int64(np.floor((cy - oy) * inv)) != c:
-                    continue
-                if m == cap:
-                    grown = np.empty(2 * cap, dtype=np.int64)
-                    grown[:cap] = key
-                    key, cap = grown, 2 * cap
-                p, q = eb[a], eb[b]
+                ok = (min(ax1, ex1[b]) >= cx) & (min(ay1, ey1[b]) >= cy)
+                ok &= np.int64(np.floor((cx - ox) * inv)) * width + np.int64(np.floor((cy - oy) * inv)) == c
+                q = eb[b]
                 key[m] = min(p, q) * n + max(p, q)
-                m += 1
+                m += ok
         g = end
     return np.sort(key[:m])
 
