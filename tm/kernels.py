@@ -24,7 +24,8 @@ import numpy as np
 from numba import njit
 
 __all__ = ["timed_pairs_plain", "timed_pairs_tight", "reach_boxes", "grid_pairs", "union_bounds", "slot_bounds", "path_slots",
-           "cover_boxes", "cover_frame_bounds", "best_assignments"]
+           "cover_boxes", "cover_frame_bounds", "best_assignments", "stop_closure", "min_labels",
+           "greedy_tables", "greedy_stops", "merge_rows"]
 
 
 @njit(cache=True, inline="always")
@@ -81,16 +82,34 @@ def timed_pairs_plain(A, B, ca, cos_a, sin_a, lo_a, hi_a, cb, cos_b, sin_b, lo_b
     """Whether claims ``a[i[t]]`` and ``b[j[t]]`` meet at some slot (``timed`` check), one box per
     slot.  ``A``, ``B``: the slots' world bounding boxes ``(4, n, K)`` (the pre-filter, compared
     with ``pad``); ``ca``, ``cos_a``, ``sin_a``, ``lo_a``, ``hi_a``: centres, headings' cos and sin,
-    segment-frame corners ``(n, K, 2)``; slots past a shorter horizon are its last one."""
+    segment-frame corners ``(n, K, 2)``; slots past a shorter horizon are its last one.  With as
+    many slot boxes on both sides (``KA == KB``), the pre-filter of every slot of a pair is
+    evaluated first in one branch-free pass (most pairs meet at no slot) and the separating-axis
+    test then runs on the slots that passed, in order, up to the first that meets: the same answer."""
     n = len(i)
     out = np.zeros(n, dtype=np.bool_)
     KA, KB = A.shape[2], B.shape[2]
     La, Lb = lo_a.shape[1], lo_b.shape[1]
     K = max(KA, KB)
+    same = KA == KB
+    meet = np.zeros(K, dtype=np.bool_)
     for t in range(n):
         p, q = i[t], j[t]
+        if same:
+            a0, a1, a2, a3 = A[0, p], A[1, p], A[2, p], A[3, p]
+            b0, b1, b2, b3 = B[0, q], B[1, q], B[2, q], B[3, q]
+            some = False
+            for k in range(K):
+                m = (a0[k] <= b1[k] + pad) & (b0[k] <= a1[k] + pad) & (a2[k] <= b3[k] + pad) & (b2[k] <= a3[k] + pad)
+                meet[k] = m
+                some |= m
+            if not some:
+                continue
         for k in range(K):
-            if not _aabb_meet(A, p, min(k, KA - 1), B, q, min(k, KB - 1), pad):
+            if same:
+                if not meet[k]:
+                    continue
+            elif not _aabb_meet(A, p, min(k, KA - 1), B, q, min(k, KB - 1), pad):
                 continue
             ka, kb = min(k, La - 1), min(k, Lb - 1)
             if _sat(ca[p, 0], ca[p, 1], cos_a[p], sin_a[p], lo_a[p, ka, 0], lo_a[p, ka, 1], hi_a[p, ka, 0],
@@ -163,28 +182,46 @@ def reach_boxes(E, index, ly, Aa, Ac, ra, ry, v_lo_t, v_hi_t, p_lo_t, p_hi_t, y_
     n = E.shape[0]
     K_out = lo.shape[1]
     inf = np.inf
+    g_v = np.empty(K)
+    h_v = np.empty(K)
     for v in range(n):
         r = row0 + v
         e0, e1, e2, e3 = E[v, 0], E[v, 1], E[v, 2], E[v, 3]
+        iv, lyv = index[v], ly[v]
+        # the tables first, in a loop of their own: its few operations per slot let many of these
+        # scattered loads be in flight at once (within the slot loop below they were its main cost)
+        for s in range(K - 1):
+            mm = _max(iv - (s + 1), 0)
+            cv = e0 * Aa[s, 1, 0] + e2 * Aa[s, 1, 1]
+            vl = _max(cv - ra[s, 1], v_lo_t[mm])
+            vh = _min(cv + ra[s, 1], v_hi_t[mm])
+            h_v[s] = _table(H, mm, vh + margin, w0, dw, False)
+            g_v[s] = _table(G, mm, vl - margin, w0, dw, True)
+        fxl, fxh, fyl, fyh = fx_lo[v], fx_hi[v], fy_lo[v], fy_hi[v]
+        c, sn = cos_h[v], sin_h[v]
+        ac, as_ = abs(c), abs(sn)
+        c0, c1 = centre[v, 0], centre[v, 1]
+        u0, u1, u2, u3 = inf, -inf, inf, -inf
         for s in range(K_out):
             if s >= K:  # T^0 whole again: slot K - 1's boxes (the same floats)
-                lo[r, s, 0], lo[r, s, 1], hi[r, s, 0], hi[r, s, 1] = lo[r, K - 1, 0], lo[r, K - 1, 1], \
-                    hi[r, K - 1, 0], hi[r, K - 1, 1]
+                b0, b1, b2, b3 = lo[r, K - 1, 0], lo[r, K - 1, 1], hi[r, K - 1, 0], hi[r, K - 1, 1]
+                lo[r, s, 0], lo[r, s, 1], hi[r, s, 0], hi[r, s, 1] = b0, b1, b2, b3
                 if with_boxes:
-                    W[0, r, s], W[1, r, s], W[2, r, s], W[3, r, s] = W[0, r, K - 1], W[1, r, K - 1], \
-                        W[2, r, K - 1], W[3, r, K - 1]
+                    w_0, w_1, w_2, w_3 = W[0, r, K - 1], W[1, r, K - 1], W[2, r, K - 1], W[3, r, K - 1]
+                    W[0, r, s], W[1, r, s], W[2, r, s], W[3, r, s] = w_0, w_1, w_2, w_3
+                    u0 = _min(u0, w_0)
+                    u1 = _max(u1, w_1)
+                    u2 = _min(u2, w_2)
+                    u3 = _max(u3, w_3)
                 continue
             if s < K - 1:
                 k = s + 1
-                mm = _max(index[v] - k, 0)
-                my = _max(ly[v] - k, 0)
+                mm = _max(iv - k, 0)
+                my = _max(lyv - k, 0)
                 cp = e0 * Aa[s, 0, 0] + e2 * Aa[s, 0, 1]
-                cv = e0 * Aa[s, 1, 0] + e2 * Aa[s, 1, 1]
                 cy = e1 * Ac[s, 0, 0] + e3 * Ac[s, 0, 1]
-                vl = _max(cv - ra[s, 1], v_lo_t[mm])
-                vh = _min(cv + ra[s, 1], v_hi_t[mm])
-                a0 = _max(_max(cp - ra[s, 0], _table(H, mm, vh + margin, w0, dw, False)), p_lo_t[mm])
-                a1 = _min(_min(cp + ra[s, 0], _table(G, mm, vl - margin, w0, dw, True)), p_hi_t[mm])
+                a0 = _max(_max(cp - ra[s, 0], h_v[s]), p_lo_t[mm])
+                a1 = _min(_min(cp + ra[s, 0], g_v[s]), p_hi_t[mm])
                 a2 = _max(cy - ry[s, 0], y_lo_t[my])
                 a3 = _min(cy + ry[s, 0], y_hi_t[my])
             else:  # the last slot: T^0 whole
@@ -193,32 +230,35 @@ def reach_boxes(E, index, ly, Aa, Ac, ra, ry, v_lo_t, v_hi_t, p_lo_t, p_hi_t, y_
             if empty:
                 a0, a1, a2, a3 = inf, -inf, inf, -inf
             else:
-                a0 = a0 - fx_lo[v]
-                a1 = a1 + fx_hi[v]
-                a2 = a2 - fy_lo[v]
-                a3 = a3 + fy_hi[v]
+                a0 = a0 - fxl
+                a1 = a1 + fxh
+                a2 = a2 - fyl
+                a3 = a3 + fyh
             lo[r, s, 0], lo[r, s, 1], hi[r, s, 0], hi[r, s, 1] = a0, a2, a1, a3
             if not with_boxes:
                 continue
             hx = (a1 - a0) * 0.5
             hy = (a3 - a2) * 0.5
             if empty or not (hx >= 0 and hy >= 0):
-                W[0, r, s], W[1, r, s], W[2, r, s], W[3, r, s] = inf, -inf, inf, -inf
-                continue
-            c, sn = cos_h[v], sin_h[v]
-            ac, as_ = abs(c), abs(sn)
-            mx = (a0 + a1) * 0.5
-            my_ = (a2 + a3) * 0.5
-            wx = c * mx - sn * my_ + centre[v, 0]
-            wy = sn * mx + c * my_ + centre[v, 1]
-            ex = ac * hx + as_ * hy
-            ey = as_ * hx + ac * hy
-            W[0, r, s] = wx - ex
-            W[1, r, s] = wx + ex
-            W[2, r, s] = wy - ey
-            W[3, r, s] = wy + ey
+                w_0, w_1, w_2, w_3 = inf, -inf, inf, -inf
+            else:
+                mx = (a0 + a1) * 0.5
+                my_ = (a2 + a3) * 0.5
+                wx = c * mx - sn * my_ + c0
+                wy = sn * mx + c * my_ + c1
+                ex = ac * hx + as_ * hy
+                ey = as_ * hx + ac * hy
+                w_0, w_1, w_2, w_3 = wx - ex, wx + ex, wy - ey, wy + ey
+            W[0, r, s], W[1, r, s], W[2, r, s], W[3, r, s] = w_0, w_1, w_2, w_3
+            if s == 0:  # the bounds over the row's slots: _row_bounds' min / max, in its order
+                u0, u1, u2, u3 = w_0, w_1, w_2, w_3
+            else:
+                u0 = _min(u0, w_0)
+                u1 = _max(u1, w_1)
+                u2 = _min(u2, w_2)
+                u3 = _max(u3, w_3)
         if with_boxes:
-            _row_bounds(W, r, U)
+            U[r, 0], U[r, 1], U[r, 2], U[r, 3] = u0, u1, u2, u3
 
 
 @njit(cache=True)
@@ -230,11 +270,13 @@ def grid_pairs(x0, x1, y0, y1, mask, use_mask):
     it covers, pairs are formed within each cell (with a mask, only those with a masked box: those
     come first in a cell) and kept only in the cell holding the corner
     ``max(lo_i, lo_j)`` of their intersection, so each is reported once.  Boxes must not be
-    inverted (``x1 >= x0``, ``y1 >= y0``)."""
+    inverted (``x1 >= x0``, ``y1 >= y0``).  The entries are ordered by cell with a counting sort
+    when the grid has at most about twice as many cells as entries (else a sort), and copied in
+    that order to contiguous arrays before the pairs of each cell are formed."""
     n = len(x0)
     ox, oy = x0.min(), y0.min()
     ext = np.maximum(x1 - x0, y1 - y0)
-    h = max(np.sort(ext)[n // 2], 1e-6)
+    h = max(np.partition(ext, n // 2)[n // 2], 1e-6)
     span = max(x1.max() - ox, y1.max() - oy)
     cx0 = np.empty(n, dtype=np.int64)
     cy0 = np.empty(n, dtype=np.int64)
@@ -272,37 +314,62 @@ def grid_pairs(x0, x1, y0, y1, mask, use_mask):
         for e in range(total):
             late[e] = 0 if mask[box[e]] else 1
     sub = cell * 2 + late
-    if sub.max() < (1 << 62) // total:  # sort packed (cell, late, entry): much faster than argsort
+    n_sub = sub.max() + 1
+    if n_sub <= 4 * total + 64:  # counting sort by (cell, late), entries in order within one
+        first = np.zeros(n_sub + 1, dtype=np.int64)
+        for e in range(total):
+            first[sub[e] + 1] += 1
+        for u in range(n_sub):
+            first[u + 1] += first[u]
+        order = np.empty(total, dtype=np.int64)
+        for e in range(total):
+            order[first[sub[e]]] = e
+            first[sub[e]] += 1
+    elif n_sub <= (1 << 62) // total:  # sort packed (cell, late, entry): much faster than argsort
         order = np.sort(sub * total + np.arange(total)) % total
     else:
         order = np.argsort(sub, kind="mergesort")
+    # the entries in that order, contiguous: a cell's pairs read its boxes' bounds side by side
+    ex0 = np.empty(total)
+    ex1 = np.empty(total)
+    ey0 = np.empty(total)
+    ey1 = np.empty(total)
+    eb = np.empty(total, dtype=np.int64)
+    ec = np.empty(total, dtype=np.int64)
+    for g in range(total):
+        b = box[order[g]]
+        ex0[g], ex1[g], ey0[g], ey1[g], eb[g], ec[g] = x0[b], x1[b], y0[b], y1[b], b, cell[order[g]]
     cap = max(16, 4 * n)
     key = np.empty(cap, dtype=np.int64)
     m = 0
     g = 0
     while g < total:
-        c = cell[order[g]]
+        c = ec[g]
         end = g + 1
-        while end < total and cell[order[end]] == c:
+        while end < total and ec[end] == c:
             end += 1
-        for a in range(g, end):
-            p = box[order[a]]
-            if use_mask and not mask[p]:
-                break  # it and every entry after it unmasked
-            for b in range(a + 1, end):
-                q = box[order[b]]
-                cx = max(x0[p], x0[q])
-                cy = max(y0[p], y0[q])
-                if not (min(x1[p], x1[q]) >= cx and min(y1[p], y1[q]) >= cy):
-                    continue
-                if np.int64(np.floor((cx - ox) * inv)) * width + np.int64(np.floor((cy - oy) * inv)) != c:
-                    continue
-                if m == cap:
-                    grown = np.empty(2 * cap, dtype=np.int64)
-                    grown[:cap] = key
-                    key, cap = grown, 2 * cap
+        last = end  # pairs start at a masked entry: those before the cell's first unmasked one
+        if use_mask:
+            last = g
+            while last < end and mask[eb[last]]:
+                last += 1
+        for a in range(g, last):
+            ax0, ax1, ay0, ay1 = ex0[a], ex1[a], ey0[a], ey1[a]
+            if m + (end - a) > cap:  # room for every pair of this entry: the loop below writes each
+                while m + (end - a) > cap:
+                    cap *= 2
+                grown = np.empty(cap, dtype=np.int64)
+                grown[:m] = key[:m]
+                key = grown
+            p = eb[a]
+            for b in range(a + 1, end):  # branch-free: each key written, kept (m + 1) when it counts
+                cx = max(ax0, ex0[b])
+                cy = max(ay0, ey0[b])
+                ok = (min(ax1, ex1[b]) >= cx) & (min(ay1, ey1[b]) >= cy)
+                ok &= np.int64(np.floor((cx - ox) * inv)) * width + np.int64(np.floor((cy - oy) * inv)) == c
+                q = eb[b]
                 key[m] = min(p, q) * n + max(p, q)
-                m += 1
+                m += ok
         g = end
     return np.sort(key[:m])
 
@@ -490,3 +557,142 @@ def best_assignments(start, size, nodes, e_ptr, e_a, e_b, e_excl, w, go):
                 best, best_a = score, a
         for j in range(s):
             go[nodes[s0 + j]] = ((best_a >> j) & 1) == 1
+
+
+@njit(cache=True)
+def stop_closure(stopped, a, b):
+    """:func:`tm.selection.propagate_stops`: the least superset of the stop mask ``stopped`` (n,) closed
+    under ``g_a <= g_b`` for every edge (``a[e]`` stops when ``b[e]`` does), by a search from the
+    stopped requesters along the edges reversed (the closure is unique: any order gives it)."""
+    n, m = len(stopped), len(a)
+    out = stopped.copy()
+    first = np.zeros(n + 1, dtype=np.int64)  # edges grouped by b: the a's that wait on each b
+    for e in range(m):
+        first[b[e] + 1] += 1
+    for v in range(n):
+        first[v + 1] += first[v]
+    fill = first[:n].copy()
+    waits = np.empty(m, dtype=np.int64)
+    for e in range(m):
+        waits[fill[b[e]]] = a[e]
+        fill[b[e]] += 1
+    todo = np.empty(n, dtype=np.int64)
+    top = 0
+    for v in range(n):
+        if out[v]:
+            todo[top] = v
+            top += 1
+    while top:
+        top -= 1
+        v = todo[top]
+        for x in range(first[v], first[v + 1]):
+            u = waits[x]
+            if not out[u]:
+                out[u] = True
+                todo[top] = u
+                top += 1
+    return out
+
+
+@njit(cache=True)
+def min_labels(n, a, b):
+    """:func:`tm.selection.components`: per node the smallest node of its connected component (edges
+    ``(a[e], b[e])``), by union-find whose root is always its set's smallest node."""
+    parent = np.arange(n)
+    for e in range(len(a)):
+        x, y = a[e], b[e]
+        while parent[x] != x:
+            parent[x] = parent[parent[x]]
+            x = parent[x]
+        while parent[y] != y:
+            parent[y] = parent[parent[y]]
+            y = parent[y]
+        if x < y:
+            parent[y] = x
+        elif y < x:
+            parent[x] = y
+    for v in range(n):
+        parent[v] = parent[parent[v]]  # roots come first in node order: every chain is now flat
+    return parent
+
+
+@njit(cache=True)
+def _incident(n, a, b):
+    """Rows ``(a[e], b[e])`` grouped by ``b``: ``first`` (n + 1,), ``other`` the ``a`` of each."""
+    first = np.zeros(n + 1, dtype=np.int64)
+    for e in range(len(a)):
+        first[b[e] + 1] += 1
+    for v in range(n):
+        first[v + 1] += first[v]
+    fill = first[:n].copy()
+    other = np.empty(len(a), dtype=np.int64)
+    for e in range(len(a)):
+        other[fill[b[e]]] = a[e]
+        fill[b[e]] += 1
+    return first, other
+
+
+@njit(cache=True)
+def greedy_tables(n, ex_a, ex_b, lq_a, lq_b):
+    """The edges of :func:`greedy_stops` grouped by requester: exclusions ``(x, p)`` by ``p`` and
+    ``(p, x)`` by ``p``, and rows ``g_i <= g_p`` by ``p`` (``first`` (n + 1,), ``other`` pairs)."""
+    f1, o1 = _incident(n, ex_a, ex_b)
+    f2, o2 = _incident(n, ex_b, ex_a)
+    f3, o3 = _incident(n, lq_a, lq_b)
+    return f1, o1, f2, o2, f3, o3
+
+
+@njit(cache=True)
+def greedy_stops(deg, stopped, ex_f1, ex_o1, ex_f2, ex_o2, lq_f, lq_o, pick):
+    """The stop loop of :func:`tm.selection.select_greedy` with the active degrees ``deg`` (n,) kept
+    up to date instead of recounted: stopping ``p`` takes one from the other end of each of ``p``'s
+    exclusions still active, adds one to each requester ``i`` outside the stop set with a row
+    ``g_i <= g_p``, and zeroes ``p``'s (the same integers as the recount).  Stops ``pick`` first
+    (-1: none), then the requester of highest degree while it is alone; returns the tied
+    requesters, ascending, when there are several (the caller draws the next ``pick`` among them),
+    an empty array when the highest degree is 0.  Edges: :func:`greedy_tables`."""
+    n = len(deg)
+    while True:
+        if pick >= 0:
+            p = pick
+            stopped[p] = True
+            for x in range(ex_f1[p], ex_f1[p + 1]):  # rows (x, p)
+                if not stopped[ex_o1[x]]:
+                    deg[ex_o1[x]] -= 1
+            for x in range(ex_f2[p], ex_f2[p + 1]):  # rows (p, x)
+                if not stopped[ex_o2[x]]:
+                    deg[ex_o2[x]] -= 1
+            for x in range(lq_f[p], lq_f[p + 1]):    # rows g_i <= g_p
+                if not stopped[lq_o[x]]:
+                    deg[lq_o[x]] += 1
+            deg[p] = 0
+        best = deg.max() if n else 0
+        if best == 0:
+            return np.empty(0, dtype=np.int64)
+        ties = np.flatnonzero(deg == best)
+        if len(ties) > 1:
+            return ties
+        pick = ties[0]
+
+
+@njit(cache=True)
+def merge_rows(cur_lo, cur_hi, new_lo, new_hi, src):
+    """The claim corners after a decision (:func:`tm.manager._result_claims`): row ``v`` of ``lo``,
+    ``hi`` (V, K, 2) is row ``src[v]`` of ``new_lo``, ``new_hi`` where ``src[v] >= 0`` (a granted
+    request), else row ``v`` of ``cur_lo``, ``cur_hi``: one pass, each row read once (a copy of
+    the current rows and a gather and scatter of the granted ones read the granted rows three
+    times).  Copies: the same floats."""
+    V, K = cur_lo.shape[0], cur_lo.shape[1]
+    lo = np.empty((V, K, 2))
+    hi = np.empty((V, K, 2))
+    for v in range(V):
+        r = src[v]
+        if r >= 0:
+            for k in range(K):
+                lo[v, k, 0], lo[v, k, 1] = new_lo[r, k, 0], new_lo[r, k, 1]
+                hi[v, k, 0], hi[v, k, 1] = new_hi[r, k, 0], new_hi[r, k, 1]
+        else:
+            for k in range(K):
+                lo[v, k, 0], lo[v, k, 1] = cur_lo[v, k, 0], cur_lo[v, k, 1]
+                hi[v, k, 0], hi[v, k, 1] = cur_hi[v, k, 0], cur_hi[v, k, 1]
+    return lo, hi

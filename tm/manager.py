@@ -38,6 +38,7 @@ from controllers.tolerances import GEOMETRY_TOL
 from tm.claims import Claims, claim_conflicts, conflicting_pairs
 from tm.families import FamilyTable, build_family_table
 from tm.geometry import broad_phase
+from tm.kernels import merge_rows
 from tm.reach import (PREFILTER_TOL_FACTOR, ReachClaims, claims_conflict, pad_slots, pairwise_conflicts,
                       union_aabb, world_aabb)
 from tm.selection import propagate_stops, select_greedy, select_optimal
@@ -302,8 +303,11 @@ def _result_claims(c: _Conflicts, go_r: np.ndarray) -> Claims | ReachClaims:
     if isinstance(c.cur, ReachClaims):
         K = max(c.cur.lo.shape[1], c.new.lo.shape[1])
         cur, new = pad_slots(c.cur, K), pad_slots(c.new, K)
-        centre, heading, lo, hi = cur.centre.copy(), cur.heading.copy(), cur.lo.copy(), cur.hi.copy()
-        centre[g], heading[g], lo[g], hi[g] = new.centre[go_r], new.heading[go_r], new.lo[go_r], new.hi[go_r]
+        centre, heading = cur.centre.copy(), cur.heading.copy()
+        centre[g], heading[g] = new.centre[go_r], new.heading[go_r]
+        src = np.full(len(centre), -1, dtype=np.intp)  # the granted vehicles' rows of new
+        src[g] = np.flatnonzero(go_r)
+        lo, hi = merge_rows(cur.lo, cur.hi, new.lo, new.hi, src)
         return ReachClaims(centre, heading, lo, hi)
     out = {}
     for name in ("centre", "index", "heading"):

@@ -20,7 +20,7 @@ import numpy as np
 from scipy.optimize import Bounds, LinearConstraint, milp
 from scipy.sparse import coo_matrix
 
-from tm.kernels import best_assignments
+from tm.kernels import best_assignments, greedy_stops, greedy_tables, min_labels, stop_closure
 
 __all__ = ["feasible", "select_greedy", "select_optimal", "propagate_stops", "components"]
 
@@ -56,48 +56,34 @@ def select_greedy(n: int, fixed_hits, leq, excl, rng: np.random.Generator) -> np
     fixed_hits = np.asarray(fixed_hits, dtype=np.intp)
     leq, excl = _edges(leq), _edges(excl)
     stopped = np.zeros(n, dtype=bool)
+    # the active degrees with nobody stopped; then kept up to date as requesters stop (compiled,
+    # tm.kernels.greedy_stops), the random draws here: one per tie, as the recount per stop did
+    deg = (fixed_hits + np.bincount(excl.ravel(), minlength=n)).astype(np.int64)
+    col = lambda a, k: np.ascontiguousarray(a[:, k], dtype=np.int64)  # noqa: E731
+    tables = greedy_tables(n, col(excl, 0), col(excl, 1), col(leq, 0), col(leq, 1))
+    pick = -1
     while True:
-        ex = excl[~stopped[excl[:, 0]] & ~stopped[excl[:, 1]]]
-        lq = leq[~stopped[leq[:, 0]] & stopped[leq[:, 1]]]
-        deg = np.where(stopped, 0, fixed_hits) \
-            + np.bincount(ex.ravel(), minlength=n) + np.bincount(lq[:, 0], minlength=n)
-        best = deg.max() if n else 0
-        if best == 0:
+        ties = greedy_stops(deg, stopped, *tables, pick)
+        if not len(ties):
             return ~stopped
-        ties = np.flatnonzero(deg == best)
-        stopped[ties[rng.integers(len(ties))] if len(ties) > 1 else ties[0]] = True
+        pick = ties[rng.integers(len(ties))]
 
 
 def propagate_stops(stopped, leq) -> np.ndarray:
-    """Close a stop mask under ``g_i <= g_j``: if ``j`` stops, ``i`` must stop."""
+    """Close a stop mask under ``g_i <= g_j``: if ``j`` stops, ``i`` must stop (compiled,
+    :func:`tm.kernels.stop_closure`)."""
     stopped = np.array(stopped, dtype=bool)
     leq = _edges(leq)
-    while True:
-        add = stopped[leq[:, 1]] & ~stopped[leq[:, 0]]
-        if not add.any():
-            return stopped
-        stopped[leq[add, 0]] = True
+    return stop_closure(stopped, np.ascontiguousarray(leq[:, 0]), np.ascontiguousarray(leq[:, 1]))
 
 
 def components(n: int, edges) -> np.ndarray:
-    """Connected-component labels of an undirected graph on ``n`` nodes (vectorised).
-
-    Min-label propagation over the edges with pointer jumping; each label is
-    the smallest node of its component.  (scipy's ``connected_components``
-    costs ~0.3 ms of overhead per call here, more than a whole decision.)
+    """Connected-component labels of an undirected graph on ``n`` nodes: each label is the
+    smallest node of its component (compiled union-find, :func:`tm.kernels.min_labels`; scipy's
+    ``connected_components`` costs ~0.3 ms of overhead per call here).
     """
     edges = _edges(edges)
-    label = np.arange(n)
-    a, b = edges[:, 0], edges[:, 1]
-    while True:
-        m = np.minimum(label[a], label[b])
-        new = label.copy()
-        np.minimum.at(new, a, m)
-        np.minimum.at(new, b, m)
-        new = new[new]
-        if np.array_equal(new, label):
-            return label
-        label = new
+    return min_labels(n, np.ascontiguousarray(edges[:, 0]), np.ascontiguousarray(edges[:, 1]))
 
 
 def _milp(n: int, leq: np.ndarray, excl: np.ndarray, w: np.ndarray, time_limit: float):

@@ -156,6 +156,26 @@ def test_broad_phase_equals_brute_force_box_overlaps(seed, n, integer):
 
 
 @settings(max_examples=30, deadline=None)
+@given(seeds, st.integers(2, 80), st.sampled_from([0.0, 30.0, 1e4, 3e8]))
+def test_broad_phase_on_dense_and_sparse_grids_equals_brute_force(seed, n, span):
+    """Boxes in one cluster (more pairs than the kernel's first guess, 4 n: its key array grows) and
+    in clusters over a span of 30 m (a dense grid: entries ordered by a counting sort), 10 km
+    (far more cells than entries: a sort of packed keys) and 3e8 m (keys too large to pack: argsort)."""
+    rng = np.random.default_rng(seed)
+    centres = rng.uniform(0, span, size=(max(1, n // 8), 2))
+    lo = centres[rng.integers(len(centres), size=n)] + rng.uniform(0, 3, size=(n, 2))
+    hi = lo + rng.uniform(0.1, 2.0, size=(n, 2))
+    mask = rng.random(n) < 0.4
+    for m in (None, mask):
+        i, j = broad_phase(lo, hi, GEOMETRY_TOL, mask=m)
+        got = set(zip(i.tolist(), j.tolist()))
+        assert len(got) == len(i) and np.all(np.diff(i * n + j) > 0)   # each pair once, sorted
+        ov = np.all((lo[:, None] <= hi[None] + GEOMETRY_TOL) & (lo[None] <= hi[:, None] + GEOMETRY_TOL), axis=2)
+        want = {(a, b) for a in range(n) for b in range(a + 1, n) if ov[a, b] and (m is None or m[a] or m[b])}
+        assert got == want
+
+
+@settings(max_examples=30, deadline=None)
 @given(seeds, st.integers(2, 40))
 def test_min_pair_distance_is_the_brute_force_minimum(seed, n):
     rng = np.random.default_rng(seed)

@@ -163,6 +163,21 @@ def test_timed_check_sees_both_answers():
     assert 0 < got.sum() < len(got)
 
 
+@pytest.mark.parametrize("K", [1, 2, 5, 17])
+def test_timed_check_with_equal_horizons_equals_every_slot_by_numpy(K):
+    """Equal horizons (the kernel's pass over every slot's pre-filter first): the reference's answer,
+    on pairs that pass no pre-filter, pass one but no separating-axis test, and meet."""
+    rng = np.random.default_rng(K)
+    a, b = _random_claims(rng, 40, K, False), _random_claims(rng, 30, K, False)
+    i, j = np.divmod(np.arange(40 * 30), 30)                       # every pair
+    got = claims_conflict(a, i, b, j, "timed")
+    assert np.array_equal(got, _ref_timed(a, i, b, j, GEOMETRY_TOL))
+    A, B, pad = a.slot_boxes, b.slot_boxes, PREFILTER_TOL_FACTOR * GEOMETRY_TOL
+    passed = ((A[0][i] <= B[1][j] + pad) & (B[0][j] <= A[1][i] + pad) &
+              (A[2][i] <= B[3][j] + pad) & (B[2][j] <= A[3][i] + pad)).any(axis=1)
+    assert got.any() and (~passed).any() and (passed & ~got).any()
+
+
 @pytest.fixture(scope="module")
 def bus_model(shared_set_cache):
     return lane_class(get_class("bus"), SynthesisSettings(cache_dir=shared_set_cache)).reach
@@ -384,3 +399,30 @@ def test_exhaustive_selection_equals_the_numpy_enumeration(seed, n, density, tie
     if sizes.max() > 14:  # a MILP component: not the kernel's
         return
     np.testing.assert_array_equal(go, _ref_select(n, leq, excl, w))
+
+
+# ------------------------------------------------------------------ the claims after a decision
+@pytest.mark.parametrize("p_go", [0.0, 0.4, 1.0])
+@pytest.mark.parametrize("kc, kn", [(5, 5), (3, 5), (5, 2)])
+def test_result_claims_are_the_new_rows_where_granted_else_the_current(p_go, kc, kn):
+    """tm.manager._result_claims (tm.kernels.merge_rows): granted requesters' rows are their new
+    claims, every other row the current one, bit for bit, the shorter horizon padded with its last slot."""
+    from tm.manager import _Conflicts, _result_claims
+    from tm.reach import pad_slots
+
+    rng = np.random.default_rng(kc * 10 + kn)
+    V, req = 9, np.array([0, 2, 3, 7, 8])
+    cur, new = _random_claims(rng, V, kc, False), _random_claims(rng, len(req), kn, False)
+    go = rng.random(len(req)) < p_go
+    e = np.zeros((0, 2), dtype=np.intp)
+    c = _Conflicts(req=req, cur=cur, new=new, fixed_hits=np.zeros(len(req), dtype=np.intp), leq=e, excl=e, edges=e,
+                   edge_kinds=np.zeros(0, dtype="<U9"), seconds=(0.0, 0.0, 0.0))
+    got = _result_claims(c, go)
+    K = max(kc, kn)
+    pc, pn = pad_slots(cur, K), pad_slots(new, K)
+    lo, hi, centre, heading = pc.lo.copy(), pc.hi.copy(), cur.centre.copy(), cur.heading.copy()
+    lo[req[go]], hi[req[go]], centre[req[go]], heading[req[go]] = pn.lo[go], pn.hi[go], new.centre[go], new.heading[go]
+    assert np.array_equal(got.lo, lo) and np.array_equal(got.hi, hi)
+    assert np.array_equal(got.centre, centre) and np.array_equal(got.heading, heading)
+    assert np.array_equal(np.signbit(got.lo), np.signbit(lo)) and got.lo.shape == (V, K, 2)
+    assert not np.shares_memory(got.lo, cur.lo) and not np.shares_memory(got.hi, new.hi)

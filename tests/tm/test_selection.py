@@ -77,6 +77,57 @@ def test_forced_stops_propagate_through_hold_regions():
     assert go.tolist() == [False, False, False, True]
 
 
+@settings(max_examples=60, deadline=None)
+@given(st.integers(1, 40), st.integers(0, 2**32 - 1), st.floats(0, 0.3), st.floats(0, 0.5))
+def test_stop_closure_is_the_fixed_point(n, seed, density, p_stop):
+    """Random g_i <= g_j edges (cycles and repeated edges included): the closure is the fixed point of
+    "j stopped, so i stops" applied to all edges until nothing changes."""
+    rng = np.random.default_rng(seed)
+    leq = rng.integers(0, n, size=(int(density * n * n), 2))
+    start = rng.random(n) < p_stop
+    before, want = start.copy(), start.copy()
+    while True:
+        add = want[leq[:, 1]] & ~want[leq[:, 0]]
+        if not add.any():
+            break
+        want[leq[add, 0]] = True
+    got = propagate_stops(start, leq)
+    assert got.dtype == bool and np.array_equal(got, want)
+    assert np.array_equal(start, before)                                 # the input is not changed
+
+
+def _greedy_by_recount(n, fixed_hits, leq, excl, rng):
+    """select_greedy as it was: the active degrees recounted after every stop."""
+    stopped = np.zeros(n, dtype=bool)
+    while True:
+        ex = excl[~stopped[excl[:, 0]] & ~stopped[excl[:, 1]]]
+        lq = leq[~stopped[leq[:, 0]] & stopped[leq[:, 1]]]
+        deg = np.where(stopped, 0, fixed_hits) \
+            + np.bincount(ex.ravel(), minlength=n) + np.bincount(lq[:, 0], minlength=n)
+        best = deg.max() if n else 0
+        if best == 0:
+            return ~stopped
+        ties = np.flatnonzero(deg == best)
+        stopped[ties[rng.integers(len(ties))] if len(ties) > 1 else ties[0]] = True
+
+
+@settings(max_examples=80, deadline=None)
+@given(st.integers(0, 40), st.integers(0, 2**32 - 1), st.floats(0, 0.3), st.floats(0, 0.3), st.floats(0, 0.4))
+def test_greedy_equals_the_recount_draw_for_draw(n, seed, d_excl, d_leq, p_fixed):
+    """Degrees kept up to date: the same Go set and the same random draws as the recount after every
+    stop (random instances with ties, repeated rows, both orders of a pair, forced stops)."""
+    rng = np.random.default_rng(seed)
+    m = max(n, 1)
+    excl = rng.integers(0, m, size=(int(d_excl * n * n), 2))
+    excl = excl[excl[:, 0] != excl[:, 1]] if n else excl[:0]
+    leq = rng.integers(0, m, size=(int(d_leq * n * n), 2))[: n * n]
+    fixed = np.where(rng.random(n) < p_fixed, rng.integers(1, 3, n), 0)
+    r1, r2 = np.random.default_rng(seed + 1), np.random.default_rng(seed + 1)
+    got = select_greedy(n, fixed, leq, excl, r1)
+    assert np.array_equal(got, _greedy_by_recount(n, fixed, leq, excl, r2))
+    assert r1.random() == r2.random()                                   # as many draws
+
+
 def test_same_rng_seed_same_tie_breaks():
     excl = np.array([[i, j] for i in range(6) for j in range(i + 1, 6)])    # a clique: one goes
     runs = [select_optimal(6, np.zeros(6, int), np.zeros((0, 2), int), excl, np.ones(6, int),
