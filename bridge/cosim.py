@@ -44,6 +44,7 @@ from bridge.fleet_claims import FleetClaims
 from bridge.groups import _Group, _headings, live_groups
 from bridge.path_fleet import FRAMES, PathFleet
 from bridge.request_filters import RequestFilters
+from bridge.vehicle_stops import PlannedStop, StopBook
 from tm.reach import ReachClaims, world_aabb
 from tm.reach_book import ReachBook, admit_reach, footprint_claims
 from tm.authority_gate import AuthorityGate
@@ -85,6 +86,8 @@ class VehicleSpec:
     #: where and how fast SUMO would start it (its departPos / departSpeed, :mod:`bridge.departure`):
     #: admission tries that start first; None: at rest on its first waypoint (authority mode only)
     depart: DepartPlan | None = None
+    #: planned stops on the waypoints (SUMO's ``<stop>``, :mod:`bridge.vehicle_stops`), in route order
+    stops: tuple[PlannedStop, ...] = ()
     #: waypoints on the internal lanes of a straight connection (SUMO's direction ``s``), bool (K,):
     #: no curve speed from their shape there (:func:`controllers.speed_limits.route_speeds`); None: none
     straight: np.ndarray | None = None
@@ -317,7 +320,8 @@ class Cosim:
                                          pedestrians)
         #: requests withheld before the decision: signals, junction tokens, pedestrians, crossings
         self.filters = RequestFilters(settings.signals, self.world, self.groups, self.junctions, self.claims,
-                                      self._poses, pedestrians, crossing_gate)
+                                      self._poses, pedestrians, crossing_gate,
+                                      StopBook({sp.id: sp.stops for sp in specs if sp.stops}), settings.Ts)
         self._ms_request = 0.0  # this step's request indices
         self._window_exits = 0  # vehicle-steps past the padding's stretch (see body_window_exits)
 
@@ -565,9 +569,15 @@ class Cosim:
             if done.any():
                 self._flush(g, done)
                 for i in np.nonzero(done)[0]:
-                    self.records[g.ids[i]].arrived_s = t_s
+                    rec = self.records[g.ids[i]]
+                    rec.arrived_s = t_s
+                    # the dwell served at planned stops is not delay (SUMO's timeLoss leaves it out)
+                    dwell = self.filters.stops.dwell_s.pop(g.ids[i], 0.0)
+                    if dwell and rec.free_flow_s is not None:
+                        rec.free_flow_s += dwell
                     self.world.finish(g.ids[i])
                     self.signal_book.remove(g.ids[i])
+                    self.filters.stops.remove((g.ids[i],))
                 g.remove(done)
 
     def _monitor_and_world(self, row: dict):
@@ -877,7 +887,8 @@ def validate_specs(specs, classes: dict, path_frame: bool) -> None:
     """Check every spec before anything runs: waypoints (K >= 2, 2) at most the class's delta apart,
     road-frame routes without turns sharper than the class accepts (``path_frame``: any angle), an
     arrival waypoint before the last, speed tables of one entry per waypoint, a departure plan
-    (:mod:`bridge.departure`) whose stop points lie up to the arrival waypoint, unique ids; a
+    (:mod:`bridge.departure`) whose stop points lie up to the arrival waypoint, planned stops at
+    increasing waypoints up to it, unique ids; a
     ValueError names the vehicle and the field."""
     for s in specs:
         W = np.asarray(s.waypoints, dtype=float)
@@ -908,6 +919,11 @@ def validate_specs(specs, classes: dict, path_frame: bool) -> None:
         if s.depart is not None and not s.depart.stop_max <= last:
             raise ValueError(f"vehicle {s.id}: depart.stop_max ({s.depart.stop_max}) must be a waypoint up to its "
                              f"arrival waypoint {last}")
+        ks = [st.k for st in s.stops]
+        if ks and not (all(1 <= k <= last for k in ks) and all(a < b for a, b in zip(ks, ks[1:]))
+                       and all(st.duration_s >= 0 for st in s.stops)):
+            raise ValueError(f"vehicle {s.id}: stops must lie at increasing waypoints in 1 .. {last} with "
+                             f"durations >= 0, got {[(st.k, st.duration_s) for st in s.stops]}")
     if len({s.id for s in specs}) != len(specs):
         raise ValueError("vehicle ids must be unique")
 

@@ -41,7 +41,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterable, Mapping, Sequence
 
-__all__ = ["DemandError", "VehicleType", "PlannedVehicle", "Demand", "DepartureQueue", "read_demand", "demand_from",
+__all__ = ["DemandError", "VehicleType", "PlannedVehicle", "VehicleStop", "Demand", "DepartureQueue", "read_demand", "demand_from",
            "needs_routing",
            "VCLASS_DEFAULTS"]
 
@@ -113,6 +113,8 @@ class PlannedVehicle:
         Footprint (m), from its vType.
     depart_speed_mps : float or None
         SUMO's ``departSpeed`` (m/s; ``inf``: as fast as allowed there); None or 0: at rest.
+    stops : tuple of VehicleStop
+        Its ``<stop>`` elements, in route order (:class:`VehicleStop`).
     """
 
     id: str
@@ -125,6 +127,59 @@ class PlannedVehicle:
     length: float
     width: float
     depart_speed_mps: float | None = None
+    stops: tuple["VehicleStop", ...] = ()
+
+
+@dataclass(frozen=True)
+class VehicleStop:
+    """A ``<stop>`` of a vehicle: where it halts and for how long (SUMO's semantics: the front at
+    ``end_pos_m`` of ``lane``, at rest for ``duration_s``, and not before ``until_s``).
+
+    Parameters
+    ----------
+    lane : str
+        Lane id.
+    end_pos_m : float or None
+        The front's position on the lane (m; negative: from its end); None: the lane's end.
+    duration_s : float
+        Dwell once at rest (s, >= 0).
+    until_s : float or None
+        Earliest departure (simulation time, s); None: none.
+    place : str
+        What it stops at, for messages: a stopping place's id (``busStop`` ...) or the lane.
+    """
+
+    lane: str
+    end_pos_m: float | None
+    duration_s: float
+    until_s: float | None
+    place: str
+
+
+#: stop attributes naming a stopping place (its lane and position are in an additional file)
+STOPPING_PLACES = ("busStop", "trainStop", "containerStop", "chargingStation", "parkingArea", "overheadWireSegment")
+
+
+def _stops(file: Path, vid: str, elems) -> tuple[VehicleStop, ...]:
+    """The ``<stop>`` children ``elems`` of vehicle ``vid`` (route files read without SUMO: lane stops)."""
+    out = []
+    for e in elems:
+        place = next((a for a in STOPPING_PLACES if e.get(a)), None)
+        if place is not None:
+            raise DemandError(f"{file}: vehicle {vid!r}: <stop {place}={e.get(place)!r}> needs the additional "
+                              f"file that defines it: run the scenario from a .sumocfg (SUMO resolves its lane "
+                              f"and position), or give the stop a lane= and endPos=")
+        lane = e.get("lane")
+        if not lane:
+            raise DemandError(f"{file}: vehicle {vid!r}: <stop> needs a lane= (or a stopping place in a .sumocfg run)")
+        end = _float(file, e, "endPos")
+        dur = _float(file, e, "duration", 0.0)
+        until = _float(file, e, "until")
+        if dur is None or dur < 0 or not math.isfinite(dur):
+            raise DemandError(f"{file}: vehicle {vid!r}: <stop lane={lane!r}> duration must be a time >= 0 s, "
+                              f"got {e.get('duration')!r}")
+        out.append(VehicleStop(lane, end, float(dur), until, lane))
+    return tuple(out)
 
 
 @dataclass(frozen=True, eq=False)
@@ -351,8 +406,11 @@ def read_demand(route_files: str | os.PathLike | Sequence[str | os.PathLike], *,
         lane_raw = elem.get("departLane")
         lane = int(lane_raw) if lane_raw is not None and lane_raw.isdigit() else None
         pos, speed = _depart_pos(file, elem), _depart_speed(file, elem)
+        nested = elem.find("route")
+        stops = _stops(file, elem.get("id"), [*(nested.findall("stop") if nested is not None else ()),
+                                                *elem.findall("stop")])
         vehicles.append(PlannedVehicle(elem.get("id"), tid, depart, edges, lane, pos, t.vclass, t.length, t.width,
-                                       speed))
+                                       speed, stops))
     return Demand(tuple(vehicles), types, tuple(files))
 
 

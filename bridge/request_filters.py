@@ -3,6 +3,8 @@
 Step 1 of the co-simulation (:mod:`bridge.cosim`) ends with every vehicle's request; before the TM
 sees them, :class:`RequestFilters` withholds, in this order,
 
+- requests past a planned stop's waypoint until its dwell is served (SUMO's ``<stop>``,
+  :class:`bridge.vehicle_stops.StopBook`);
 - requests that would take a vehicle past a red (or yellow with room to stop) stop line
   (:func:`tm.signals.withhold`, link states read from the world once per step); vehicles standing
   at a red give their junction tokens back;
@@ -27,6 +29,7 @@ import numpy as np
 
 from bridge.fleet_claims import FleetClaims
 from bridge.groups import live_groups
+from bridge.vehicle_stops import StopBook
 from tm.crossing_gate import CrossingGate
 from tm.junctions import JunctionFleet
 from tm.manager import FleetState
@@ -56,11 +59,17 @@ class RequestFilters:
     pedestrians : PedestrianRule, optional
     crossing_gate : CrossingGate, optional
         Authority mode with pedestrians.
+    stops : StopBook, optional
+        The vehicles' planned stops (none by default).
+    Ts : float
+        Step length (s): a stop's dwell is counted in simulated seconds.
     """
 
     def __init__(self, signals: SignalSettings, world, groups: dict, junctions, claims: FleetClaims,
                  poses: Callable[[], tuple[np.ndarray, np.ndarray]], pedestrians: PedestrianRule | None = None,
-                 crossing_gate: CrossingGate | None = None):
+                 crossing_gate: CrossingGate | None = None, stops: StopBook | None = None, Ts: float = 0.1):
+        self.stops = stops if stops is not None else StopBook({})
+        self.Ts = float(Ts)
         self.signals = signals
         self.world = world
         self.groups = groups
@@ -91,6 +100,8 @@ class RequestFilters:
         self._link_state = None
         self._junction_fleet = None
         self._claims_now = claims_now
+        if state is not None and len(self.stops):
+            state = self._stops(state)
         if state is not None and len(self.signal_book):
             state = self._signals(state)
         elif self.junctions.standing:
@@ -102,6 +113,15 @@ class RequestFilters:
         if state is not None and self.pedestrians is not None and state.requesting.any():
             state = self._walkers(state)
         return state
+
+    # -------------------------------------------------------------- planned stops
+    def _stops(self, state: FleetState) -> FleetState:
+        """Withhold the requests of vehicles at a planned stop whose dwell is not served yet."""
+        live = live_groups(self.groups)
+        k = np.concatenate([g.k for g in live])
+        speed = np.concatenate([np.linalg.norm(g.X[:, 2:4], axis=1) for g in live])
+        req, _ = self.stops.withhold(self.t * self.Ts, state.ids, k, state.index, speed, state.requesting)
+        return replace(state, requesting=req)
 
     # -------------------------------------------------------------- signals
     def _signal_lines(self, ids, centre, heading, length):

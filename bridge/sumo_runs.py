@@ -17,7 +17,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Iterable
 
-from bridge.demand import Demand, PlannedVehicle, VehicleType
+from bridge.demand import Demand, PlannedVehicle, VehicleStop, VehicleType
 from bridge.sumo_inputs import InputError, PreparedInputs, parse_xml
 
 __all__ = ["SumoError", "check_xml", "sumo_home", "run_native", "expand_demand", "preflight"]
@@ -101,6 +101,18 @@ def run_native(api, errors: tuple, sumocfg: str | os.PathLike, *, duration_s: fl
             "vehicles_in_window": in_window}
 
 
+def _stops_of(veh, vid: str) -> tuple[VehicleStop, ...]:
+    """Vehicle ``vid``'s stops as SUMO resolved them (stopping places to their lane and end
+    position; ``until`` and ``duration`` SUMO's own, invalid ones none)."""
+    out = []
+    for st in veh.getStops(vid):
+        dur = float(st.duration)
+        until = float(st.until)
+        out.append(VehicleStop(str(st.lane), float(st.endPos), dur if dur >= 0 else 0.0,
+                               until if until >= 0 else None, str(st.stoppingPlaceID) or str(st.lane)))
+    return tuple(out)
+
+
 def expand_demand(api, errors: tuple, sumocfg: str | os.PathLike, inputs: PreparedInputs, *, begin_s: float,
                   end_s: float, seed: int, step_length: float, work_dir: str | os.PathLike) -> Demand:
     """The demand of a configuration as SUMO itself expands it, inside ``begin_s .. end_s``.
@@ -152,7 +164,7 @@ def expand_demand(api, errors: tuple, sumocfg: str | os.PathLike, inputs: Prepar
                 # defaults), then out of the network
                 seen[v] = [round(veh.getDeparture(v) - veh.getDepartDelay(v), 6), veh.getTypeID(v),
                            tuple(veh.getRoute(v)), seen[v][3] if v in seen else len(seen),
-                           float(veh.getLanePosition(v)), float(veh.getSpeed(v))]
+                           float(veh.getLanePosition(v)), float(veh.getSpeed(v)), _stops_of(veh, v)]
                 veh.remove(v, _REMOVE_VAPORIZED)
         vt = mod.vehicletype
         types = {}
@@ -169,9 +181,9 @@ def expand_demand(api, errors: tuple, sumocfg: str | os.PathLike, inputs: Prepar
         if not (begin_s - 1e-9 <= dep < end_s - 1e-9):
             continue
         t = types[tid]
-        pos, speed = how if how else (None, None)  # not inserted in the window: SUMO's defaults
+        pos, speed, stops = how if how else (None, None, ())  # not inserted in the window: SUMO's defaults
         vehicles.append(PlannedVehicle(vid, tid, float(dep), edges, None, pos, t.vclass, t.length, t.width,
-                                       speed))
+                                       speed, stops))
     return Demand(tuple(vehicles), types, tuple(Path(p) for p in inputs.expansion_routes))
 
 

@@ -583,6 +583,29 @@ class NetGeometry:
                     straight.update(c.via)
         return np.array([lane in straight for lane in route.lane_ids], dtype=bool)
 
+    def route_arc_at(self, route: "RouteWaypoints", lane_id: str, pos: float | None) -> float | None:
+        """Arc position along ``route.polyline`` of position ``pos`` on lane ``lane_id`` (SUMO's lane
+        coordinate, m; negative: from the lane's end; None: its end), projected onto the route's
+        segments on that lane -- or on that lane's edge, where the route takes another of its
+        lanes; None when the route does not use the edge."""
+        edge = lane_id.rsplit("_", 1)[0]
+        segs = [j for j, ln in enumerate(route.segment_lanes) if ln == lane_id] or \
+            [j for j, ln in enumerate(route.segment_lanes) if ln.rsplit("_", 1)[0] == edge]
+        if not segs or not self._net.hasEdge(edge):
+            return None
+        L = self.lane_length(lane_id)
+        p = L if pos is None else (pos + L if pos < 0 else pos)
+        shape = self.lane_shape(lane_id)
+        sarc = _arc(shape)
+        q = _at(shape, sarc, min(max(p, 0.0), L) * sarc[-1] / max(L, 1e-9))
+        poly, parc = route.polyline, _arc(route.polyline)
+        a, b = poly[min(segs):max(segs) + 1], poly[min(segs) + 1:max(segs) + 2]
+        d = b - a
+        L2 = np.maximum((d * d).sum(axis=1), 1e-18)
+        t = np.clip(((q - a) * d).sum(axis=1) / L2, 0.0, 1.0)
+        i = int(np.argmin(np.hypot(*(a + t[:, None] * d - q).T)))
+        return float(parc[min(segs) + i] + t[i] * np.sqrt(L2[i]))
+
     def ends_at_boundary(self, edge_id: str) -> bool:
         """Whether edge ``edge_id`` is the only edge entering the junction it ends at (a dead end at
         the network's boundary, or a fringe node whose other edges only leave it): no other stream
