@@ -21,7 +21,7 @@ import numpy as np
 
 from controllers.speed_limits import SpeedSettings
 from bridge.cosim import Cosim, CosimSettings, VehicleSpec, Zone
-from bridge.departure import depart_plan, first_edge_end
+from bridge.departure import DepartPlan, depart_plan, first_edge_end
 from bridge.groups import _headings as spec_headings
 from bridge.pose import front_bumper, sumo_angle
 from analysis.kpis import baseline_vehicle_table, read_tripinfo
@@ -633,6 +633,8 @@ def run_sumo(target: str, out: Path, opts, observers_extra: list | None = None) 
                 stops, left = plan_stops(pv.id, arc, [geo.route_arc_at(r, st.lane, st.end_pos_m) for st in pv.stops],
                                          pv.stops, classes[c].length, begin)
                 stops_skipped.extend(left)
+                if plan is not None and stops and plan.stop_max > stops[0].k:  # it must not start past its stop
+                    plan = DepartPlan(min(plan.k, stops[0].k), plan.speed, stops[0].k)
                 if authority and summary["options"]["arrival"] == "pass" and geo.ends_at_boundary(pv.edges[-1]):
                     W, limits, arrive_k = run_out(W, limits, classes[c])
                     straight = np.concatenate([straight, np.zeros(len(W) - len(straight), dtype=bool)])

@@ -89,6 +89,9 @@ ROUTES = """<routes>
     <stop busStop="bs" duration="10"/>
   </vehicle>
   <vehicle id="p" depart="0" departSpeed="0"><route edges="A1B1 B1C1"/></vehicle>
+  <vehicle id="q" depart="0" departPos="100" departSpeed="max">
+    <route edges="C1B1 B1A1"/><stop lane="C1B1_0" endPos="120" duration="5"/>
+  </vehicle>
 </routes>
 """
 
@@ -96,7 +99,8 @@ ROUTES = """<routes>
 @pytest.mark.parametrize("controller", ["authority", "paper"])
 def test_sumo_stops_are_served_as_sumo_serves_them(tmp_path, controller):
     """A lane stop (20 s) and a bus stop defined in an additional file (10 s, SUMO resolves its lane
-    and position) on one car's route; a twin route without stops beside it.  The stops cost the
+    and position) on one car's route; a twin route without stops beside it; a third car entering at
+    speed just before its stop.  The stops cost the
     stopping car as much time against the other as in SUMO's own run (within 10 s; authority: it
     arrives within 5 s of SUMO's), and its delay leaves the 30 s of dwell out as SUMO's timeLoss
     does; 0 SUMO collisions.  (A stop off the vehicle's route: SUMO refuses the configuration, and
@@ -119,7 +123,9 @@ def test_sumo_stops_are_served_as_sumo_serves_them(tmp_path, controller):
     s, v = runs["m"]
     assert s["complete"] and s["safe"], s.get("error") or s["safety_violations"]
     assert s["collisions_sumo"] == 0
-    assert s["vehicle_stops"] == 2 and s["vehicle_stops_served"] == 2 and s["vehicle_stops_missed"] == 0
+    # q enters at speed 20 m before its stop: it starts slow enough to halt there (authority mode
+    # clamps its start's first stop point to the stop; else it would pass it, missed)
+    assert s["vehicle_stops"] == 3 and s["vehicle_stops_served"] == 3 and s["vehicle_stops_missed"] == 0
     b = runs["b"][1]
     cost, cost_sumo = (t.loc["s", "arrival_s"] - t.loc["p", "arrival_s"] for t in (v, b))
     assert cost > 30.0 and abs(cost - cost_sumo) < 10.0  # SUMO: 40 s (measured: authority 41.0, paper 33.8)
