@@ -198,9 +198,10 @@ class RequestFilters:
         if fn is not None:  # the claims' body padding along a route (SUMO: bridge.sumo_body)
             k_end = np.concatenate([g.k_end for g in live_groups(self.groups)])
 
-            def pads(rows, idx, ids=state.ids):  # a run-out (never driven): the arrival waypoint's
+            def route_pads(rows, idx, ids=state.ids):  # a run-out (never driven): the arrival waypoint's
                 p = fn([ids[r] for r in rows.tolist()], np.minimum(idx, k_end[rows]))
                 return np.zeros((len(idx), 4)) if p is None else p
+            pads = route_pads
         fleet = JunctionFleet(state.ids, state.family, cur_lo, cur_hi,
                               tuple((g.W, g.H, g.k) for g in live_groups(self.groups)), pads)
         req = self.junctions.withhold(self.t, fleet, state.requesting, new_lo, new_hi)
