@@ -132,3 +132,39 @@ def test_sumo_stops_are_served_as_sumo_serves_them(tmp_path, controller):
     if controller == "authority":  # (the paper's vehicles crawl: 94 s for what SUMO drives in 34)
         assert abs(v.loc["s", "arrival_s"] - b.loc["s", "arrival_s"]) < 5.0  # measured 74.1 / 74.0
     assert v.loc["s", "delay_s"] - v.loc["p", "delay_s"] < 15.0  # braking and starting twice, not the dwell
+
+
+from hypothesis import given, settings as hsettings, strategies as st  # noqa: E402
+
+
+@hsettings(max_examples=60, deadline=None)
+@given(dur=st.floats(0.0, 20.0), until=st.one_of(st.none(), st.floats(0.0, 60.0)),
+       arrive=st.integers(0, 200), moving=st.lists(st.booleans(), min_size=300, max_size=300))
+def test_a_stop_releases_exactly_when_its_dwell_is_served(dur, until, arrive, moving):
+    """Random histories of one vehicle at its stop (0.1 s steps: it reaches the stop's waypoint at
+    step ``arrive``, then at rest or not as ``moving`` says): it is never released before it has
+    halted, stood the duration since, and reached ``until``; it is released the first step all
+    three hold; the dwell recorded is the time from halting to release."""
+    book = StopBook({"a": (PlannedStop(4, dur, until, "s"),)})
+    halted = released = None
+    for n in range(arrive + 300):
+        t = 0.1 * n
+        at = n >= arrive
+        rest = at and not moving[n - arrive]
+        req, held = _step(book, t, 4 if at else 3, 0 if rest else 2, 0.0 if rest else 3.0)
+        if not at:
+            assert req.all()
+            continue
+        if halted is None and rest:
+            halted = t
+        due = halted is not None and t - halted >= dur - 1e-9 and (until is None or t >= until - 1e-9)
+        if released is None:
+            assert bool(req[0]) == due, (t, halted)
+            if due:
+                released = t
+        else:
+            assert req.all()  # served: its requests go on
+    if released is not None:
+        assert book.served == 1 and book.dwell_s["a"] == pytest.approx(released - halted)
+    else:
+        assert book.served == 0
