@@ -11,8 +11,8 @@ vehicle at admission.  This module reads route files into that plan:
 * ``<route id=... edges=...>`` at top level, referenced by ``route="..."``;
 * ``<vehicle>`` with ``depart`` (seconds), ``type``, and either
   ``route="id"`` or a nested ``<route edges=...>``; ``departLane`` as a lane
-  index (anything else -- ``best``, ``free``, ... -- lets the route choose the
-  lane; the lane index is kept on the plan but not yet used); ``departPos`` in
+  index or one of SUMO's keywords (``best``, ``free``, ...: :func:`bridge.departure.depart_lane`
+  picks the lane); ``departPos`` in
   metres (SUMO's front position on the first lane, negative: from its end) and
   ``departSpeed`` in m/s, or ``max``, ``desired``, ``speedLimit`` (as fast as the
   class and the lane allow there: ``inf`` on the plan).  The other keywords
@@ -128,6 +128,13 @@ class PlannedVehicle:
     width: float
     depart_speed_mps: float | None = None
     stops: tuple["VehicleStop", ...] = ()
+    #: a ``departLane`` keyword (``free``, ``best``, ``random``, ...; :data:`DEPART_LANE_WORDS`),
+    #: resolved at set-up by :func:`bridge.departure.depart_lane`; None: a number (``depart_lane``) or none
+    depart_lane_rule: str | None = None
+
+
+#: SUMO's ``departLane`` keywords
+DEPART_LANE_WORDS = ("random", "free", "allowed", "best", "first", "random_free")
 
 
 @dataclass(frozen=True)
@@ -405,12 +412,16 @@ def read_demand(route_files: str | os.PathLike | Sequence[str | os.PathLike], *,
         t = types[tid]
         lane_raw = elem.get("departLane")
         lane = int(lane_raw) if lane_raw is not None and lane_raw.isdigit() else None
+        rule = lane_raw if lane_raw in DEPART_LANE_WORDS else None
+        if lane_raw is not None and lane is None and rule is None:
+            raise DemandError(f"{file}: vehicle {elem.get('id')!r}: departLane={lane_raw!r}: must be a lane index "
+                              f"or one of {', '.join(DEPART_LANE_WORDS)}")
         pos, speed = _depart_pos(file, elem), _depart_speed(file, elem)
         nested = elem.find("route")
         stops = _stops(file, elem.get("id"), [*(nested.findall("stop") if nested is not None else ()),
                                                 *elem.findall("stop")])
         vehicles.append(PlannedVehicle(elem.get("id"), tid, depart, edges, lane, pos, t.vclass, t.length, t.width,
-                                       speed, stops))
+                                       speed, stops, rule))
     return Demand(tuple(vehicles), types, tuple(files))
 
 

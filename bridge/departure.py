@@ -28,7 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["DepartPlan", "Start", "depart_plan", "first_edge_end", "start_ladder"]
+__all__ = ["DepartPlan", "DepartLanes", "Start", "depart_plan", "first_edge_end", "start_ladder"]
 
 #: the speeds admission tries, as fractions of the plan's (the last: at rest)
 SPEED_STEPS = (1.0, 0.5, 0.0)
@@ -114,3 +114,37 @@ def start_ladder(plan: DepartPlan, v_top: float) -> list[tuple[int, float]]:
             if key not in out:
                 out.append(key)
     return out
+
+
+class DepartLanes:
+    """The start lane of each vehicle whose ``departLane`` is one of SUMO's keywords, as SUMO picks it
+    among the first edge's lanes the vehicle may use (``costs``: each lane's lane changes to the
+    route's end, :meth:`bridge.waypoints.NetGeometry.start_lanes`):
+
+    * ``first``: the rightmost;
+    * ``best``: among those needing the fewest lane changes, ``free``/``allowed``: among all, the
+      least occupied -- in turn, per first edge and candidate set, in departure order (SUMO picks
+      the least occupied lane when the vehicle is inserted; on a busy road that spreads them);
+    * ``random``/``random_free``: drawn (seeded).
+
+    A number is used as it is; no ``departLane``: the route's own choice (None)."""
+
+    def __init__(self, seed: int = 0) -> None:
+        self._rng = np.random.default_rng(seed)
+        self._turn: dict[tuple, int] = {}
+
+    def pick(self, first_edge: str, rule: str | None, costs: dict[int, int]) -> int | None:
+        if rule is None or not costs:
+            return None
+        lanes = sorted(costs)
+        if rule == "first":
+            return lanes[0]
+        if rule == "best":
+            low = min(costs.values())
+            lanes = [a for a in lanes if costs[a] == low]
+        if rule in ("random", "random_free"):
+            return int(self._rng.choice(lanes))
+        key = (first_edge, tuple(lanes))
+        n = self._turn.get(key, 0)
+        self._turn[key] = n + 1
+        return lanes[n % len(lanes)]

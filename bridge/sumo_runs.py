@@ -16,8 +16,9 @@ import subprocess
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Iterable
+import xml.etree.ElementTree as ET
 
-from bridge.demand import Demand, PlannedVehicle, VehicleStop, VehicleType
+from bridge.demand import DEPART_LANE_WORDS, Demand, PlannedVehicle, VehicleStop, VehicleType
 from bridge.sumo_inputs import InputError, PreparedInputs, parse_xml
 
 __all__ = ["SumoError", "check_xml", "sumo_home", "run_native", "expand_demand", "preflight"]
@@ -101,6 +102,22 @@ def run_native(api, errors: tuple, sumocfg: str | os.PathLike, *, duration_s: fl
             "vehicles_in_window": in_window}
 
 
+def depart_lanes(files) -> dict[tuple[str, str], str]:
+    """``departLane`` as the route files write it: ``("vehicle", id)`` for vehicles and trips,
+    ``("flow", id)`` for flows (their vehicles are ``id.N``); libsumo does not report it, and on the
+    empty network of the expansion SUMO resolves ``free`` and ``best`` to the first lane."""
+    out: dict[tuple[str, str], str] = {}
+    for f in files:
+        try:
+            root = parse_xml(f).getroot()
+        except (InputError, OSError, ET.ParseError):
+            continue  # SUMO read them: a file it could not is refused before
+        for e in root.iter():
+            if e.tag in ("vehicle", "trip", "flow") and e.get("id") and e.get("departLane") is not None:
+                out[("flow" if e.tag == "flow" else "vehicle", e.get("id"))] = e.get("departLane")
+    return out
+
+
 def _stops_of(veh, vid: str) -> tuple[VehicleStop, ...]:
     """Vehicle ``vid``'s stops as SUMO resolved them (stopping places to their lane and end
     position; ``until`` and ``duration`` SUMO's own, invalid ones none)."""
@@ -176,14 +193,18 @@ def expand_demand(api, errors: tuple, sumocfg: str | os.PathLike, inputs: Prepar
             types[tid] = VehicleType(tid, vclass, float(vt.getLength(tid)), float(vt.getWidth(tid)), "",
                                      accel=float(vt.getAccel(tid)), decel=float(vt.getDecel(tid)),
                                      max_speed=vmax)
+    lanes = depart_lanes([*inputs.expansion_routes, *inputs.expansion_additional])
     vehicles = []
     for vid, (dep, tid, edges, order, *how) in sorted(seen.items(), key=lambda kv: (kv[1][0], kv[1][3])):
         if not (begin_s - 1e-9 <= dep < end_s - 1e-9):
             continue
         t = types[tid]
         pos, speed, stops = how if how else (None, None, ())  # not inserted in the window: SUMO's defaults
-        vehicles.append(PlannedVehicle(vid, tid, float(dep), edges, None, pos, t.vclass, t.length, t.width,
-                                       speed, stops))
+        raw = lanes.get(("vehicle", vid)) or lanes.get(("flow", vid.rsplit(".", 1)[0]))
+        lane = int(raw) if raw is not None and raw.isdigit() else None
+        rule = raw if raw in DEPART_LANE_WORDS else None
+        vehicles.append(PlannedVehicle(vid, tid, float(dep), edges, lane, pos, t.vclass, t.length, t.width,
+                                       speed, stops, rule))
     return Demand(tuple(vehicles), types, tuple(Path(p) for p in inputs.expansion_routes))
 
 

@@ -21,7 +21,7 @@ import numpy as np
 
 from controllers.speed_limits import SpeedSettings
 from bridge.cosim import Cosim, CosimSettings, VehicleSpec, Zone
-from bridge.departure import DepartPlan, depart_plan, first_edge_end
+from bridge.departure import DepartLanes, DepartPlan, depart_plan, first_edge_end
 from bridge.groups import _headings as spec_headings
 from bridge.pose import front_bumper, sumo_angle
 from analysis.kpis import baseline_vehicle_table, read_tripinfo
@@ -600,13 +600,17 @@ def run_sumo(target: str, out: Path, opts, observers_extra: list | None = None) 
         geo = load_net(net)
         routes, specs, undrivable = {}, [], {}
         stops_skipped: list[str] = []  # planned stops a vehicle cannot serve (messages)
+        lanes = DepartLanes(seed)  # departLane keywords: the lane SUMO would pick
         slots = LinkSlots()
         authority = getattr(opts, "controller", "paper") == "authority"
         for pv in demand.vehicles:
             c = cls_of[pv.id]
             try:
                 m = classes[c].model
-                r = geo.route(pv.edges, m.delta, vclass=pv.vclass, vehicle_id=pv.id,
+                lane = pv.depart_lane if pv.depart_lane is not None else \
+                    lanes.pick(pv.edges[0], pv.depart_lane_rule, geo.start_lanes(pv.edges, pv.vclass)
+                               if pv.depart_lane_rule is not None else {})
+                r = geo.route(pv.edges, m.delta, vclass=pv.vclass, vehicle_id=pv.id, depart_lane=lane,
                               turn_max_deg=m.turn_max_deg if m.frame == "road" else None)
                 # depart with the whole body on the first lane (SUMO's departPos="base"), not
                 # with its back half in the junction behind it

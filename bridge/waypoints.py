@@ -665,14 +665,12 @@ class NetGeometry:
             conns.append(cs)
         return conns
 
-    def _choose(self, edges: Sequence[str], conns: list[list[_Conn]], depart_lane: int | None,
-                vclass: str | None = None) -> tuple[int, list[_Conn]]:
-        """Fewest lane changes over the route: (arrival lane on the first edge, connection per junction)."""
-        m = len(edges)
-        n_last = self.lane_count(edges[-1])
-        best = [dict.fromkeys(range(n_last), 0)]  # best[k][a]: cost from edge k on, arriving on lane a
+    def _lane_plan(self, edges: Sequence[str], conns: list[list[_Conn]]) -> tuple[list[dict], list[dict]]:
+        """``(best, choice)``: ``best[k][a]``, the fewest lane changes from edge ``k`` on arriving on its
+        lane ``a``, and ``choice[k][a]``, the connection taken from there (dynamic programming)."""
+        best = [dict.fromkeys(range(self.lane_count(edges[-1])), 0)]
         choice: list[dict[int, _Conn]] = []
-        for k in range(m - 2, -1, -1):
+        for k in range(len(edges) - 2, -1, -1):
             nxt = best[0]
             cost_k, choice_k = {}, {}
             for a in range(self.lane_count(edges[k])):
@@ -682,6 +680,21 @@ class NetGeometry:
                 choice_k[a] = cands[0]
             best.insert(0, cost_k)
             choice.insert(0, choice_k)
+        return best, choice
+
+    def start_lanes(self, edges: Sequence[str], vclass: str | None = None) -> dict[int, int]:
+        """The lanes of a route's first edge that ``vclass`` may use, each with the lane changes the
+        route needs from there (raises :class:`RouteError` on a route that cannot be drawn)."""
+        edges = tuple(edges)
+        best, _ = self._lane_plan(edges, self._check_route(edges, "route", vclass))
+        return {a: c for a, c in best[0].items() if self.lane_allows(edges[0], a, vclass)}
+
+    def _choose(self, edges: Sequence[str], conns: list[list[_Conn]], depart_lane: int | None,
+                vclass: str | None = None) -> tuple[int, list[_Conn]]:
+        """Fewest lane changes over the route: (arrival lane on the first edge, connection per junction)."""
+        m = len(edges)
+        n_last = self.lane_count(edges[-1])
+        best, choice = self._lane_plan(edges, conns)
         if depart_lane is None:
             # free start: the lane of the cheapest first connection (no change needed on edge 0)
             if m == 1:  # the lowest lane the vClass may use (lane 0 is often a sidewalk)
