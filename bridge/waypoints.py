@@ -753,6 +753,10 @@ class NetGeometry:
         if depart_lane is not None and not 0 <= depart_lane < self.lane_count(edges[0]):
             raise RouteError(f"{who}: depart lane {depart_lane} does not exist on edge {edges[0]!r} "
                              f"(lanes 0..{self.lane_count(edges[0]) - 1})")
+        if depart_lane is not None and not self.lane_allows(edges[0], depart_lane, vclass):
+            ok = [i for i in range(self.lane_count(edges[0])) if self.lane_allows(edges[0], i, vclass)]
+            raise RouteError(f"{who}: depart lane {depart_lane} of edge {edges[0]!r} does not admit vClass "
+                             f"{vclass!r} (lanes it may use: {ok})")
         arrive, path = self._choose(edges, conns, depart_lane, vclass)
 
         pieces: list[tuple[np.ndarray, str, bool]] = []  # (points, lane id, on its centre line)

@@ -14,7 +14,7 @@ import pytest
 from bridge.cli import main
 from bridge.demand import DemandError, read_demand
 from bridge.departure import DepartLanes
-from bridge.waypoints import load_net
+from bridge.waypoints import RouteError, load_net
 
 
 def test_keywords_pick_as_sumo_does():
@@ -83,3 +83,20 @@ def test_a_free_flow_spreads_over_the_lanes_in_sumo(tmp_path):
     lanes = {t.get("id"): t.get("departLane") for t in ET.parse(out / "tripinfo.xml").getroot().iter("tripinfo")}
     assert Counter(v for k, v in lanes.items() if k.startswith("f.")) == {"A0B0_0": 2, "A0B0_1": 2, "A0B0_2": 2}
     assert lanes["n"] == "A1B1_1"
+
+
+def test_a_depart_lane_the_vclass_may_not_use_is_named(tmp_path):
+    """A numeric departLane onto a lane the vehicle's vClass may not use (a bus lane for a car):
+    a RouteError naming the vehicle, the lane, the edge and the lanes it may use (the run reports
+    that vehicle undrivable and goes on)."""
+    (tmp_path / "n.nod.xml").write_text('<nodes><node id="a" x="0" y="0"/><node id="b" x="200" y="0"/></nodes>')
+    (tmp_path / "n.edg.xml").write_text('<edges><edge id="ab" from="a" to="b" numLanes="2" speed="13.89">'
+                                        '<lane index="0" allow="bus"/></edge></edges>')
+    net = tmp_path / "n.net.xml"
+    subprocess.run([str(Path(sys.executable).parent / "netconvert"), "-n", str(tmp_path / "n.nod.xml"),
+                    "-e", str(tmp_path / "n.edg.xml"), "-o", str(net)], check=True, capture_output=True)
+    geo = load_net(net)
+    assert geo.route(["ab"], 3.0, depart_lane=1, vclass="passenger").depart_lane_index == 1
+    with pytest.raises(RouteError, match=r"vehicle 'v': depart lane 0 of edge 'ab' does not admit vClass "
+                                         r"'passenger' \(lanes it may use: \[1\]\)"):
+        geo.route(["ab"], 3.0, depart_lane=0, vclass="passenger", vehicle_id="v")
