@@ -572,12 +572,11 @@ class Cosim:
                     rec = self.records[g.ids[i]]
                     rec.arrived_s = t_s
                     # the dwell served at planned stops is not delay (SUMO's timeLoss leaves it out)
-                    dwell = self.filters.stops.dwell_s.pop(g.ids[i], 0.0)
+                    dwell = self.filters.stops.finish(g.ids[i])
                     if dwell and rec.free_flow_s is not None:
                         rec.free_flow_s += dwell
                     self.world.finish(g.ids[i])
                     self.signal_book.remove(g.ids[i])
-                    self.filters.stops.remove((g.ids[i],))
                 g.remove(done)
 
     def _monitor_and_world(self, row: dict):

@@ -137,6 +137,14 @@ class PlannedVehicle:
 DEPART_LANE_WORDS = ("random", "free", "allowed", "best", "first", "random_free")
 
 
+def depart_lane_of(raw: str | None) -> tuple[int | None, str | None]:
+    """``(lane, rule)`` of a ``departLane`` value: a lane index, or one of :data:`DEPART_LANE_WORDS`;
+    ``(None, None)`` for none or anything else."""
+    if raw is not None and raw.isdigit():
+        return int(raw), None
+    return None, raw if raw in DEPART_LANE_WORDS else None
+
+
 @dataclass(frozen=True)
 class VehicleStop:
     """A ``<stop>`` of a vehicle: where it halts and for how long (SUMO's semantics: the front at
@@ -411,8 +419,7 @@ def read_demand(route_files: str | os.PathLike | Sequence[str | os.PathLike], *,
                               f"types: {', '.join(sorted(types))}")
         t = types[tid]
         lane_raw = elem.get("departLane")
-        lane = int(lane_raw) if lane_raw is not None and lane_raw.isdigit() else None
-        rule = lane_raw if lane_raw in DEPART_LANE_WORDS else None
+        lane, rule = depart_lane_of(lane_raw)
         if lane_raw is not None and lane is None and rule is None:
             raise DemandError(f"{file}: vehicle {elem.get('id')!r}: departLane={lane_raw!r}: must be a lane index "
                               f"or one of {', '.join(DEPART_LANE_WORDS)}")

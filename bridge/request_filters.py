@@ -115,21 +115,23 @@ class RequestFilters:
         return state
 
     # -------------------------------------------------------------- planned stops
+    def _k_speed(self) -> tuple[np.ndarray, np.ndarray]:
+        """The fleet's current waypoints and speeds, in fleet order (from the groups' states)."""
+        live = live_groups(self.groups)
+        return (np.concatenate([g.k for g in live]),
+                np.concatenate([np.linalg.norm(g.X[:, 2:4], axis=1) for g in live]))
+
     def _stops(self, state: FleetState) -> FleetState:
         """Withhold the requests of vehicles at a planned stop whose dwell is not served yet."""
-        live = live_groups(self.groups)
-        k = np.concatenate([g.k for g in live])
-        speed = np.concatenate([np.linalg.norm(g.X[:, 2:4], axis=1) for g in live])
+        k, speed = self._k_speed()
         req, _ = self.stops.withhold(self.t * self.Ts, state.ids, k, state.index, speed, state.requesting)
         return replace(state, requesting=req)
 
     # -------------------------------------------------------------- signals
     def _signal_lines(self, ids, centre, heading, length):
         """The fleet's stop lines (:meth:`tm.signals.SignalBook.gather`) from the groups' states."""
-        live = live_groups(self.groups)
         pos, _ = self._poses()
-        k = np.concatenate([g.k for g in live])
-        speed = np.concatenate([np.linalg.norm(g.X[:, 2:4], axis=1) for g in live])
+        k, speed = self._k_speed()
         return k, speed, self.signal_book.gather(ids, k, centre, heading, pos, 0.5 * length)
 
     def _signals(self, state: FleetState) -> FleetState:

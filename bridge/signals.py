@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from bridge.waypoints import NetGeometry, RouteWaypoints, _arc
+from bridge.waypoints import NetGeometry, RouteWaypoints, _arc, project_arc
 from tm.signals import StopLines
 
 __all__ = ["LinkSlots", "route_stop_lines", "link_time_to_red"]
@@ -118,17 +118,6 @@ class LinkSlots:
         return out
 
 
-def _project(poly: np.ndarray, parc: np.ndarray, q: np.ndarray, j0: int, j1: int) -> float:
-    """Arc length of the point of segments ``j0 .. j1 - 1`` of ``poly`` closest to ``q``."""
-    a, b = poly[j0:j1], poly[j0 + 1:j1 + 1]
-    d = b - a
-    L2 = np.maximum((d * d).sum(axis=1), 1e-18)
-    t = np.clip(((q - a) * d).sum(axis=1) / L2, 0.0, 1.0)
-    dist = np.hypot(*(a + t[:, None] * d - q).T)
-    i = int(np.argmin(dist))
-    return float(parc[j0 + i] + t[i] * np.sqrt(L2[i]))
-
-
 def route_stop_lines(geo: NetGeometry, route: RouteWaypoints, arc: np.ndarray, slots: LinkSlots) -> StopLines:
     """The signalised stop lines ``route`` crosses, along its polyline.
 
@@ -165,7 +154,7 @@ def route_stop_lines(geo: NetGeometry, route: RouteWaypoints, arc: np.ndarray, s
         q = np.asarray(net.getLane(lane_id).getShape()[-1][:2], dtype=float)
         lo = max((on[0] if on else cursor) - 2, 0)
         hi = min((cursor if on else lo + 4) + 2, len(poly) - 1)
-        s = _project(poly, parc, q, lo, max(hi, lo + 1))
+        s = project_arc(poly, parc, q, lo, max(hi, lo + 1))
         if on:
             s = min(s, float(parc[cursor]))
         s_line.append(s)

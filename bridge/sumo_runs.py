@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Iterable
 import xml.etree.ElementTree as ET
 
-from bridge.demand import DEPART_LANE_WORDS, Demand, PlannedVehicle, VehicleStop, VehicleType
+from bridge.demand import Demand, PlannedVehicle, VehicleStop, VehicleType, depart_lane_of
 from bridge.sumo_inputs import InputError, PreparedInputs, parse_xml
 
 __all__ = ["SumoError", "check_xml", "sumo_home", "run_native", "expand_demand", "preflight"]
@@ -200,9 +200,7 @@ def expand_demand(api, errors: tuple, sumocfg: str | os.PathLike, inputs: Prepar
             continue
         t = types[tid]
         pos, speed, stops = how if how else (None, None, ())  # not inserted in the window: SUMO's defaults
-        raw = lanes.get(("vehicle", vid)) or lanes.get(("flow", vid.rsplit(".", 1)[0]))
-        lane = int(raw) if raw is not None and raw.isdigit() else None
-        rule = raw if raw in DEPART_LANE_WORDS else None
+        lane, rule = depart_lane_of(lanes.get(("vehicle", vid)) or lanes.get(("flow", vid.rsplit(".", 1)[0])))
         vehicles.append(PlannedVehicle(vid, tid, float(dep), edges, lane, pos, t.vclass, t.length, t.width,
                                        speed, stops, rule))
     return Demand(tuple(vehicles), types, tuple(Path(p) for p in inputs.expansion_routes))

@@ -17,7 +17,7 @@ the route's geometry.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Iterable, Sequence
+from typing import Sequence
 
 import numpy as np
 
@@ -160,9 +160,9 @@ class StopBook:
         else:
             self.passed += 1
 
-    def remove(self, ids: Iterable[str]) -> None:
-        """Forget vehicles that left (their served dwell stays in :attr:`dwell_s`)."""
-        for vid in ids:
-            self._plans.pop(vid, None)
-            self._next.pop(vid, None)
-            self._since.pop(vid, None)
+    def finish(self, vid: str) -> float:
+        """Forget vehicle ``vid``, which left; returns the dwell it served at its stops (s)."""
+        self._plans.pop(vid, None)
+        self._next.pop(vid, None)
+        self._since.pop(vid, None)
+        return self.dwell_s.pop(vid, 0.0)

@@ -39,6 +39,7 @@ import numpy as np
 
 __all__ = [
     "RouteError",
+    "project_arc",
     "RouteWaypoints",
     "NetGeometry",
     "load_net",
@@ -170,6 +171,18 @@ class RouteWaypoints:
 def _arc(points: np.ndarray) -> np.ndarray:
     d = np.hypot(*np.diff(points, axis=0).T) if len(points) > 1 else np.zeros(0)
     return np.concatenate([[0.0], np.cumsum(d)])
+
+
+def project_arc(poly: np.ndarray, parc: np.ndarray, q: np.ndarray, j0: int, j1: int) -> float:
+    """Arc length (``parc``: the arcs of ``poly``'s points) of the point of segments ``j0 .. j1 - 1`` of
+    ``poly`` closest to ``q``."""
+    a, b = poly[j0:j1], poly[j0 + 1:j1 + 1]
+    d = b - a
+    L2 = np.maximum((d * d).sum(axis=1), 1e-18)
+    t = np.clip(((q - a) * d).sum(axis=1) / L2, 0.0, 1.0)
+    dist = np.hypot(*(a + t[:, None] * d - q).T)
+    i = int(np.argmin(dist))
+    return float(parc[j0 + i] + t[i] * np.sqrt(L2[i]))
 
 
 def _at(points: np.ndarray, arc: np.ndarray, s: float) -> np.ndarray:
@@ -598,13 +611,7 @@ class NetGeometry:
         shape = self.lane_shape(lane_id)
         sarc = _arc(shape)
         q = _at(shape, sarc, min(max(p, 0.0), L) * sarc[-1] / max(L, 1e-9))
-        poly, parc = route.polyline, _arc(route.polyline)
-        a, b = poly[min(segs):max(segs) + 1], poly[min(segs) + 1:max(segs) + 2]
-        d = b - a
-        L2 = np.maximum((d * d).sum(axis=1), 1e-18)
-        t = np.clip(((q - a) * d).sum(axis=1) / L2, 0.0, 1.0)
-        i = int(np.argmin(np.hypot(*(a + t[:, None] * d - q).T)))
-        return float(parc[min(segs) + i] + t[i] * np.sqrt(L2[i]))
+        return project_arc(route.polyline, _arc(route.polyline), q, min(segs), max(segs) + 1)
 
     def ends_at_boundary(self, edge_id: str) -> bool:
         """Whether edge ``edge_id`` is the only edge entering the junction it ends at (a dead end at

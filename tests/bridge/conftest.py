@@ -55,3 +55,17 @@ def tls_cfg(tmp_path_factory):
                    '</input><time><begin value="0"/><end value="150"/><step-length value="0.1"/></time>'
                    '</configuration>')
     return cfg
+
+
+@pytest.fixture
+def netgenerate_grid(tmp_path):
+    """A factory: ``make(x, y, length, lanes, name="net.net.xml")`` writes netgenerate's grid of
+    ``x`` x ``y`` junctions, ``length`` m blocks and ``lanes`` lanes each way into the test's
+    directory and returns its path."""
+    def make(x: int, y: int, length: float, lanes: int, name: str = "net.net.xml") -> Path:
+        out = tmp_path / name
+        subprocess.run([str(Path(sys.executable).parent / "netgenerate"), "--grid", "--grid.x-number", str(x),
+                        "--grid.y-number", str(y), "--grid.length", str(length), "--default.lanenumber", str(lanes),
+                        "-o", str(out)], check=True, capture_output=True)
+        return out
+    return make

@@ -33,14 +33,10 @@ def test_keywords_pick_as_sumo_does():
     assert set(drawn) == {0, 1, 2} and drawn == [again.pick("e", "random", costs) for _ in range(300)]
 
 
-def test_start_lanes_count_the_lane_changes(tmp_path):
+def test_start_lanes_count_the_lane_changes(netgenerate_grid):
     """On a 3-lane netgenerate grid a left turn at the first junction leaves from the leftmost lane:
     0 changes from there, 1 and 2 from the others; a straight route: 0 from every lane."""
-    net = tmp_path / "n.net.xml"
-    subprocess.run([str(Path(sys.executable).parent / "netgenerate"), "--grid", "--grid.x-number", "3",
-                    "--grid.y-number", "3", "--grid.length", "200", "--default.lanenumber", "3",
-                    "-o", str(net)], check=True, capture_output=True)
-    geo = load_net(net)
+    geo = load_net(netgenerate_grid(3, 3, 200, 3, "n.net.xml"))
     assert geo.start_lanes(["A0B0", "B0C0"], "passenger") == {0: 0, 1: 0, 2: 0}
     left = geo.start_lanes(["A0B0", "B0B1"], "passenger")
     assert left[max(left)] == 0 and left[0] == max(left) and sorted(left.values()) == [0, 1, 2]
@@ -60,14 +56,12 @@ def test_route_file_depart_lanes(tmp_path):
         read_demand(f)
 
 
-def test_a_free_flow_spreads_over_the_lanes_in_sumo(tmp_path):
+def test_a_free_flow_spreads_over_the_lanes_in_sumo(tmp_path, netgenerate_grid):
     """A flow with departLane="free" on a 3-lane road (a .sumocfg, SUMO's own expansion): muvsim
     starts its vehicles on all three lanes in turn, as SUMO's drivers spread over them (SUMO's
     tripinfo of each run); a numeric departLane is kept; 0 SUMO collisions.  (Before, every one
     started on the route's own choice, lane 0.)"""
-    subprocess.run([str(Path(sys.executable).parent / "netgenerate"), "--grid", "--grid.x-number", "3",
-                    "--grid.y-number", "2", "--grid.length", "300", "--default.lanenumber", "3",
-                    "-o", str(tmp_path / "net.net.xml")], check=True, capture_output=True)
+    netgenerate_grid(3, 2, 300, 3)
     (tmp_path / "r.rou.xml").write_text(
         '<routes><flow id="f" begin="0" end="12" period="2" departLane="free" departSpeed="0">'
         '<route edges="A0B0 B0C0"/></flow>'

@@ -5,8 +5,6 @@ a property), the route files' attributes, and a real SUMO run (``departPos="last
 
 import json
 import math
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -226,14 +224,12 @@ ROUTES = """<routes>
 """
 
 
-def test_sumo_depart_last_at_max_speed(tmp_path):
+def test_sumo_depart_last_at_max_speed(tmp_path, netgenerate_grid):
     """departPos="last", departSpeed="max" (SUMO's A10KW demo): SUMO's own expansion resolves them
     (the empty lane's end, the lane's speed), muvsim starts the vehicle as far along at speed as its
     first stop point allows -- its route much shorter than the one starting at the lane's start at
     rest, and it arrives first; 0 SUMO collisions."""
-    subprocess.run([str(Path(sys.executable).parent / "netgenerate"), "--grid", "--grid.x-number", "3",
-                    "--grid.y-number", "2", "--grid.length", "300", "--default.lanenumber", "1",
-                    "-o", str(tmp_path / "net.net.xml")], check=True, capture_output=True)
+    netgenerate_grid(3, 2, 300, 1)
     (tmp_path / "d.rou.xml").write_text(ROUTES)
     cfg = tmp_path / "s.sumocfg"
     cfg.write_text('<configuration><input><net-file value="net.net.xml"/><route-files value="d.rou.xml"/>'

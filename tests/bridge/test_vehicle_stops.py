@@ -2,9 +2,6 @@
 files' stops (bridge.demand), and real SUMO runs where SUMO resolves bus stops itself."""
 
 import json
-import subprocess
-import sys
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -40,6 +37,7 @@ def test_a_vehicle_is_held_at_its_stop_until_the_dwell_is_served():
     assert _step(book, 9.0, 9, 0, 0.0)[0].all()               # duration 0: served the step it halts
     assert book.served == 2 and book.pending("a") is None
     assert book.withheld == 4
+    assert book.finish("a") == pytest.approx(3.0) and "a" not in book.dwell_s  # it left: its dwell, once
 
 
 def test_until_and_a_stop_passed_before_halting():
@@ -97,7 +95,7 @@ ROUTES = """<routes>
 
 
 @pytest.mark.parametrize("controller", ["authority", "paper"])
-def test_sumo_stops_are_served_as_sumo_serves_them(tmp_path, controller):
+def test_sumo_stops_are_served_as_sumo_serves_them(tmp_path, netgenerate_grid, controller):
     """A lane stop (20 s) and a bus stop defined in an additional file (10 s, SUMO resolves its lane
     and position) on one car's route; a twin route without stops beside it; a third car entering at
     speed just before its stop.  The stops cost the
@@ -105,9 +103,7 @@ def test_sumo_stops_are_served_as_sumo_serves_them(tmp_path, controller):
     arrives within 5 s of SUMO's), and its delay leaves the 30 s of dwell out as SUMO's timeLoss
     does; 0 SUMO collisions.  (A stop off the vehicle's route: SUMO refuses the configuration, and
     muvsim's error is SUMO's message, naming the vehicle and the lane.)"""
-    subprocess.run([str(Path(sys.executable).parent / "netgenerate"), "--grid", "--grid.x-number", "3",
-                    "--grid.y-number", "2", "--grid.length", "200", "--default.lanenumber", "1",
-                    "-o", str(tmp_path / "net.net.xml")], check=True, capture_output=True)
+    netgenerate_grid(3, 2, 200, 1)
     (tmp_path / "r.rou.xml").write_text(ROUTES)
     (tmp_path / "bs.add.xml").write_text('<additional><busStop id="bs" lane="B0C0_0" startPos="80" endPos="100"/>'
                                          '</additional>')
