@@ -91,6 +91,11 @@ class VehicleSpec:
     #: waypoints on the internal lanes of a straight connection (SUMO's direction ``s``), bool (K,):
     #: no curve speed from their shape there (:func:`controllers.speed_limits.route_speeds`); None: none
     straight: np.ndarray | None = None
+    #: names of the junction zones its route passes through (a SUMO route: the junctions its edges start
+    #: and end at, :meth:`bridge.waypoints.NetGeometry.route_junctions`); authority mode's junction
+    #: layer leaves it out of every other zone's tokens (:class:`tm.junctions.JunctionGate`, ``through``).
+    #: None: every zone whose guard its route reaches (the free plane's routes)
+    junctions: frozenset[str] | None = None
 
     @property
     def arrival_index(self) -> int:
@@ -300,10 +305,11 @@ class Cosim:
         # authority mode on the stop points and reach claims (tm.authority_gate)
         self.zones = list(zones or [])
         self.zones_ignored = 0  # zones the liveness layer does not use (none: both modes have one)
-        if self.authority:
+        if self.authority:  # each route's own junctions (paper mode: every zone its route reaches, as measured)
             self.junctions = AuthorityGate(self.zones, {
                 c: AuthorityReach.of(m.tables, self.classes[c].length, self.classes[c].width,
-                                     self.classes[c].model.delta) for c, m in self.reach.models.items()})
+                                     self.classes[c].model.delta) for c, m in self.reach.models.items()},
+                through={s_.id: s_.junctions for s_ in specs if s_.junctions is not None})
         else:
             self.junctions = JunctionGate(self.zones, {
                 c: ClassReach.of(f.position_sets, self.classes[c].length, self.classes[c].width,
@@ -759,7 +765,7 @@ class Cosim:
             # and before its first junction guard (an entry line it may not pass without the token)
             limit = plan.stop_max
             if isinstance(self.junctions, AuthorityGate):
-                limit = min(limit, self.junctions.entry_limit(W, Hw, sp.vclass))
+                limit = min(limit, self.junctions.entry_limit(W, Hw, sp.vclass, sp.id))
             for k, v in start_ladder(plan, top):
                 if k == 0 and v == 0.0:
                     continue  # the old start: None, last

@@ -648,7 +648,8 @@ def run_sumo(target: str, out: Path, opts, observers_extra: list | None = None) 
             routes[pv.id] = r
             specs.append(VehicleSpec(id=pv.id, vclass=c, waypoints=W, depart_s=pv.depart_s - begin,
                                      speed_limits=limits, stop_lines=lines, arrive_k=arrive_k, depart=plan, stops=stops,
-                                     straight=straight if straight.any() else None))
+                                     straight=straight if straight.any() else None,
+                                     junctions=geo.route_junctions(pv.edges)))
         summary["vehicles_undrivable"] = len(undrivable)
         for why in stops_skipped:  # a stop SUMO's own run would not serve either: said, not hidden
             print(f"muvsim: warning: {why}; it is left out", file=sys.stderr)

@@ -623,6 +623,18 @@ class NetGeometry:
             raise RouteError(f"unknown edge {edge_id!r}") from None
         return [e.getID() for e in node.getIncoming() if e.getFunction() != "internal"] == [edge_id]
 
+    def route_junctions(self, edges: Sequence[str]) -> frozenset[str]:
+        """The ids of the junctions a route over ``edges`` passes through: where its first edge starts
+        and where each of its edges ends (the junction zones it needs tokens of,
+        :class:`tm.junctions.JunctionGate`'s ``through``; a junction beside the route, e.g. an on-ramp
+        merge on the opposite carriageway, is not one of them)."""
+        try:
+            got = [self._net.getEdge(edges[0]).getFromNode().getID()] if len(edges) else []
+            got += [self._net.getEdge(e).getToNode().getID() for e in edges]
+        except KeyError as exc:
+            raise RouteError(f"unknown edge {exc.args[0]!r}") from None
+        return frozenset(got)
+
     def lane_count(self, edge_id: str) -> int:
         """Number of lanes of an edge."""
         return self._net.getEdge(edge_id).getLaneNumber()

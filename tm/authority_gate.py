@@ -101,6 +101,9 @@ class AuthorityGate(JunctionGate):
     zones : list of Zone
     classes : mapping of str to AuthorityReach
         Every class a fleet row may name.
+    through : mapping of str to collection of str, optional
+        Vehicle id -> the names of the zones its route passes through (:class:`tm.junctions.JunctionGate`):
+        only their guards give its route intervals (:meth:`intervals`, :meth:`entry_limit`).
 
     The fleet's ``claim_lo``, ``claim_hi`` are the world bounding boxes of every vehicle's
     ``∪_k S_k`` (:func:`tm.reach.world_aabb`); :meth:`withhold` ignores the new claims' boxes
@@ -115,8 +118,8 @@ class AuthorityGate(JunctionGate):
     #: Chained zones asked for together, all or none (module notes); off: one zone at a time.
     chain = True
 
-    def __init__(self, zones, classes: dict):
-        super().__init__(zones, classes)
+    def __init__(self, zones, classes: dict, through: dict | None = None):
+        super().__init__(zones, classes, through)
         #: vehicle id -> its route's intervals through the guards (:meth:`intervals`)
         self._spans: dict[str, tuple] = {}
         self._span_runs: dict[str, list] = {}  # vehicle id -> its intervals as tuples (:meth:`_span_of`)
@@ -164,7 +167,7 @@ class AuthorityGate(JunctionGate):
         if found is not None:
             return found
         W, H, _ = fleet.route(row)
-        i, z = self._guard_hits(W, H, fleet.family[row])
+        i, z = self._guard_hits(W, H, fleet.family[row], vid)
         o = np.lexsort((i, z))
         i, z = i[o], z[o]
         run = np.r_[True, (z[1:] != z[:-1]) | (i[1:] != i[:-1] + 1)] if len(i) else np.zeros(0, dtype=bool)
@@ -174,20 +177,27 @@ class AuthorityGate(JunctionGate):
         found = self._spans[vid] = (z[starts], i[starts], np.where(exits, last + 1, len(W) - 1), exits)
         return found
 
-    def _guard_hits(self, W: np.ndarray, H: np.ndarray, vclass: str) -> tuple[np.ndarray, np.ndarray]:
+    def _guard_hits(self, W: np.ndarray, H: np.ndarray, vclass: str,
+                    vid: str | None = None) -> tuple[np.ndarray, np.ndarray]:
         """``(waypoint, zone)`` pairs of a route ``W`` (headings ``H``) whose hold box (``T^0 ⊕
         footprint`` at the arriving and leaving headings) meets a zone's shared guard (the largest
-        class's: no holder's claims stick out of the zone further, module notes)."""
+        class's: no holder's claims stick out of the zone further, module notes); with vehicle id
+        ``vid``, only the zones its route passes through (:attr:`through`)."""
         half = self.classes[vclass].hold_half(H, np.r_[H[1:], H[-1:]])
-        return self.guards.pairs(W - half, W + half)
+        i, z = self.guards.pairs(W - half, W + half)
+        if vid is not None and vid in self.through:
+            on = self.passes([vid] * len(z), z)
+            i, z = i[on], z[on]
+        return i, z
 
-    def entry_limit(self, W: np.ndarray, H: np.ndarray, vclass: str) -> int:
+    def entry_limit(self, W: np.ndarray, H: np.ndarray, vclass: str, vid: str | None = None) -> int:
         """The last waypoint of a route ``W`` (headings ``H``: of the segments arriving at each) before
         the first of its guard intervals (:meth:`intervals`) that starts after its first waypoint: the
         furthest stop point a vehicle entering on it may have without a token (bridge/departure.py);
-        its last waypoint when there is none."""
+        its last waypoint when there is none.  ``vid``: the vehicle's id (only the zones its route
+        passes through count, :attr:`through`)."""
         W, H = np.asarray(W, dtype=float), np.asarray(H, dtype=float)
-        i, _ = self._guard_hits(W, H, vclass)
+        i, _ = self._guard_hits(W, H, vclass, vid)
         inside = np.zeros(len(W), dtype=bool)
         inside[i] = True
         entries = np.flatnonzero(inside[1:] & ~inside[:-1]) + 1  # runs starting after waypoint 0
@@ -370,6 +380,7 @@ class AuthorityGate(JunctionGate):
         lo, hi = W[idx] - half, W[idx] + half
         near = np.flatnonzero(np.all((fleet.claim_lo <= hi.max(axis=0)) & (fleet.claim_hi >= lo.min(axis=0)), axis=1))
         near = near[~np.isin(near, [row] + rows)]  # the queue's own claims do not count
+        near = near[self.passes([fleet.ids[j] for j in near.tolist()], np.full(len(near), z))]  # nor passers-by
         c_lo, c_hi = fleet.claim_lo[near], fleet.claim_hi[near]
         return not np.any(np.all((lo[:, None, :] <= c_hi[None]) & (hi[:, None, :] >= c_lo[None]), axis=2))
 

@@ -177,6 +177,16 @@ class JunctionGate:
     classes : mapping of str to ClassReach
         Every class a fleet row may name.  The guard of each zone is the zone enlarged by
         the largest claim radius of any class (``max |P^N|`` plus half the footprint diagonal).
+    through : mapping of str to collection of str, optional
+        Vehicle id -> the names of the zones its route passes through (a SUMO route: the
+        junctions its edges start and end at, :meth:`bridge.waypoints.NetGeometry.route_junctions`).
+        A zone its route does not pass through is none of its business here: it never waits for
+        that zone's token, and its claims in that zone's guard do not hold the zone's candidates
+        back (the traffic manager still checks them against everyone's).  A vehicle left out (and
+        every vehicle when None) belongs to every zone whose guard it reaches, as before.  Without
+        it the guard, a box around the junction, catches roads that only pass by: on SUMO's
+        ``A10KW`` the two on-ramp merges ``21432413`` and ``32500343`` lie beside the opposite
+        carriageway, whose vehicles waited for their tokens and held them (README, Known limits).
     """
 
     #: Whether a waiter may take a token past one that a holder blocks (earlier in the order) when
@@ -184,9 +194,15 @@ class JunctionGate:
     #: the round.
     pass_blocked = False
 
-    def __init__(self, zones, classes: dict):
+    def __init__(self, zones, classes: dict, through: dict | None = None):
         self.zones = list(zones)
         self.classes = dict(classes)
+        names: dict[str, list[int]] = {}
+        for z, zone in enumerate(self.zones):
+            names.setdefault(zone.name, []).append(z)
+        #: vehicle id -> the zone indices its route passes through (absent: every zone, see ``through``)
+        self.through: dict[str, frozenset[int]] = {
+            vid: frozenset(z for name in zs for z in names.get(name, ())) for vid, zs in (through or {}).items()}
         radius = self.guard_radius(self.classes.values())
         self.lo = np.array([z.lo for z in self.zones], dtype=float).reshape(-1, 2) - radius
         self.hi = np.array([z.hi for z in self.zones], dtype=float).reshape(-1, 2) + radius
@@ -212,6 +228,16 @@ class JunctionGate:
         """How far the guard reaches beyond the zone (m): the largest claim radius of any class
         (``max |P^N|`` plus half the footprint diagonal; centred claims reach backwards too)."""
         return max((c.top + 0.5 * np.hypot(c.length, c.width) for c in classes), default=0.0)
+
+    def passes(self, ids, zs: np.ndarray) -> np.ndarray:
+        """Whether vehicle ``ids[i]``'s route passes through zone ``zs[i]`` (bool (n,); see ``through``:
+        a vehicle left out passes through every zone)."""
+        through = self.through
+        zs = np.asarray(zs, dtype=np.intp).reshape(-1)
+        if not through:
+            return np.ones(len(zs), dtype=bool)
+        return np.array([vid not in through or z in through[vid] for vid, z in zip(ids, zs.tolist())],
+                        dtype=bool).reshape(-1)
 
     def give_back(self, ids) -> None:
         """The vehicles ``ids`` stand at a red light this step (replaces the last call's set):
@@ -291,7 +317,7 @@ class JunctionGate:
         ni, nz = self.guards.pairs(new_lo, new_hi)
         ci, cz = self.guards.pairs(cur_lo[r], cur_hi[r])
         Z = len(self.zones)
-        fresh = ~np.isin(ni * Z + nz, ci * Z + cz)
+        fresh = ~np.isin(ni * Z + nz, ci * Z + cz) & self.passes([ids[i] for i in r[ni].tolist()], nz)
         if self.given_back:  # a token given back is needed again, from inside the guard too
             again = np.array([z in self.given_back.get(ids[i], ()) for i, z in zip(r[ni].tolist(), nz.tolist())],
                              dtype=bool).reshape(-1)
@@ -330,13 +356,16 @@ class JunctionGate:
                 s_lo = np.array([routes[q][1][0] for q in qs])
                 s_hi = np.array([routes[q][1][1] for q in qs])
                 qi, bj = claims_grid.pairs(s_lo, s_hi)
-                other = bj != wrow[P[qs[qi]]]
+                # (nor a vehicle whose route does not pass through the zone: it never drives onto its
+                # exit road, and its claim's box is there only beside it: ``through``)
+                other = (bj != wrow[P[qs[qi]]]) & self.passes([ids[j] for j in bj.tolist()], wz[P[qs[qi]]])
                 blocked_exit[qs[qi[other]]] = True
             first = np.r_[0, np.cumsum(c_len)]
             zP = wz[P]
             # claims already in the guard that are not a holder's ("intruders"), by zone
             gi_, gz_ = self.guards.pairs(cur_lo, cur_hi)
-            keep = ~np.isin(gz_ * n + gi_, holder_keys)
+            # (a vehicle whose route does not pass through the zone is none of its business: ``through``)
+            keep = ~np.isin(gz_ * n + gi_, holder_keys) & self.passes([ids[i] for i in gi_.tolist()], gz_)
             stand = np.array([ids[i] in self.standing for i in gi_.tolist()], dtype=bool).reshape(-1)
             o = np.argsort(gz_[keep & ~stand], kind="stable")
             blocked_intr = corridor_hits(zP, wrow[P], first, c_lo, c_hi,

@@ -800,3 +800,39 @@ def test_entry_limit_is_the_waypoint_before_the_first_guard_entry():
     two = Zone("K", (45.0, -5.0), (55.0, 5.0))
     gate2 = AuthorityGate([J, two], {"car": CAR})
     assert gate2.entry_limit(W2, np.full(len(W2), 0.0), "car") < len(W2) - 1  # K ahead limits it
+
+
+# ---------------------------------------------------------------- routes that only pass by a zone
+BESIDE = ((30.0, 7.0), (-60.0, 7.0))  # west-bound, 7 m north of J's centre: its hold boxes reach J's guard
+
+
+def test_a_route_that_does_not_pass_through_a_zone_has_no_interval_there():
+    """``through`` names the zones a route passes through (SUMO: the junctions of its edges): a road
+    beside the junction, whose hold boxes reach the guard, gets no entry line there and needs no token
+    (SUMO's A10KW: the opposite carriageway beside an on-ramp merge); a vehicle left out of
+    ``through`` keeps every zone its route reaches, as before."""
+    scene = Scene({"A": EAST, "P": BESIDE})
+    fleet = scene.fleet()
+    old = _gate()
+    assert old.intervals(fleet, 1)[0].tolist() == [0]  # without: P's route has an interval at J
+    W, H = scene.routes[1]
+    assert old.entry_limit(W, H, "car") < len(W) - 1
+    gate = AuthorityGate([J], {"car": CAR}, through={"P": frozenset(), "A": frozenset({"J"})})
+    assert gate.intervals(fleet, 1)[0].tolist() == [] and gate.intervals(fleet, 0)[0].tolist() == [0]
+    assert gate.entry_limit(W, H, "car", "P") == len(W) - 1
+    assert gate.passes(["P", "A", "X"], [0, 0, 0]).tolist() == [False, True, True]
+
+
+def test_a_passer_by_neither_waits_for_the_token_nor_holds_the_zone_back():
+    """P stands beside J on its own road (its stop point inside J's guard) with a claim box that covers
+    A's corridor and exit slot (a world bounding box of claims along a diagonal road covers the next
+    carriageway: SUMO's A10KW, 2026-12-07).  Its route does not pass through J, so it is neither an
+    intruder in A's corridor nor a claim on A's exit slot: A takes the token, and P's own request to
+    move on inside the guard is not withheld.  Without ``through`` P asks for J's token too, and A is
+    held back by P's claim."""
+    claim = ((-3.0, -4.0), (15.0, 9.0))  # covers A's corridor from x = -3 and its exit slot (x = 11)
+    scene = Scene({"A": EAST, "P": BESIDE}, k={"A": ENTRY - 1, "P": 30}, claims={"P": claim})
+    old = _gate()
+    assert "A" not in scene.withhold(old) and "A" not in old.holders[0]
+    gate = AuthorityGate([J], {"car": CAR}, through={"P": frozenset(), "A": frozenset({"J"})})
+    assert scene.withhold(gate) == {"A", "P"} and set(gate.holders[0]) == {"A"}
