@@ -2,7 +2,6 @@
 NetGeometry.start_lanes), read from route files with and without a .sumocfg; real SUMO where SUMO is
 what it is about."""
 
-import json
 import subprocess
 import sys
 import xml.etree.ElementTree as ET
@@ -11,10 +10,10 @@ from pathlib import Path
 
 import pytest
 
-from bridge.cli import main
 from bridge.demand import DemandError, read_demand
 from bridge.departure import DepartLanes
 from bridge.waypoints import RouteError, load_net
+from tests.sumo_runs import run_cfg, write_cfg
 
 
 def test_keywords_pick_as_sumo_does():
@@ -66,12 +65,9 @@ def test_a_free_flow_spreads_over_the_lanes_in_sumo(tmp_path, netgenerate_grid):
         '<routes><flow id="f" begin="0" end="12" period="2" departLane="free" departSpeed="0">'
         '<route edges="A0B0 B0C0"/></flow>'
         '<vehicle id="n" depart="1" departLane="1" departSpeed="0"><route edges="A1B1 B1C1"/></vehicle></routes>')
-    cfg = tmp_path / "s.sumocfg"
-    cfg.write_text('<configuration><input><net-file value="net.net.xml"/><route-files value="r.rou.xml"/>'
-                   '</input></configuration>')
+    cfg = write_cfg(tmp_path / "s.sumocfg", "net.net.xml", routes=["r.rou.xml"])
     out = tmp_path / "m"
-    rc = main(["run", str(cfg), "--out", str(out), "--quiet", "--log", "none", "--duration", "120"])
-    s = json.loads((out / "summary.json").read_text())
+    rc, s = run_cfg(cfg, out, "--duration", "120")
     assert rc == 0 and s["complete"] and s["safe"], s.get("error") or s["safety_violations"]
     assert s["vehicles_arrived"] == 7 and s["collisions_sumo"] == 0
     lanes = {t.get("id"): t.get("departLane") for t in ET.parse(out / "tripinfo.xml").getroot().iter("tripinfo")}

@@ -3,7 +3,6 @@ starts admission tries, the loop entering vehicles at speed and further along th
 a property), the route files' attributes, and a real SUMO run (``departPos="last"``,
 ``departSpeed="max"``, as SUMO's A10KW demo writes them)."""
 
-import json
 import math
 from pathlib import Path
 
@@ -12,7 +11,6 @@ import pandas as pd
 import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 
-from bridge.cli import main
 from bridge.cosim import Cosim, CosimSettings, VehicleSpec
 from bridge.demand import DemandError, read_demand
 from bridge.departure import DepartPlan, depart_plan, start_ladder
@@ -20,6 +18,7 @@ from bridge.layouts import subsample
 from bridge.scenarios import kpi_tables
 from controllers.classes import builtin_classes
 from tm.settings import TMSettings
+from tests.sumo_runs import run_cfg, write_cfg
 
 CLASSES = builtin_classes()
 
@@ -231,12 +230,9 @@ def test_sumo_depart_last_at_max_speed(tmp_path, netgenerate_grid):
     rest, and it arrives first; 0 SUMO collisions."""
     netgenerate_grid(3, 2, 300, 1)
     (tmp_path / "d.rou.xml").write_text(ROUTES)
-    cfg = tmp_path / "s.sumocfg"
-    cfg.write_text('<configuration><input><net-file value="net.net.xml"/><route-files value="d.rou.xml"/>'
-                   '</input><time><begin value="0"/><end value="60"/></time></configuration>')
+    cfg = write_cfg(tmp_path / "s.sumocfg", "net.net.xml", routes=["d.rou.xml"], begin=0, end=60)
     out = tmp_path / "m"
-    rc = main(["run", str(cfg), "--out", str(out), "--quiet", "--log", "none", "--duration", "50"])
-    s = json.loads((out / "summary.json").read_text())
+    rc, s = run_cfg(cfg, out, "--duration", "50")
     assert rc == 0 and s["complete"], s.get("error")
     assert s["collisions_sumo"] == 0 and s["collisions_geometric"] == 0 and s["tube_escapes"] == 0
     v = pd.read_csv(out / "vehicles.csv").set_index("id")
@@ -248,7 +244,6 @@ def test_sumo_depart_last_at_max_speed(tmp_path, netgenerate_grid):
     assert v.loc["last", "depart_speed_mps"] == pytest.approx(13.89, abs=1e-6)
     # base: SUMO 1.28 inserts at the lane's speed by default too, and the lane before it is free
     assert v.loc["base", "depart_speed_mps"] > 0.0
-    rc = main(["run", str(cfg), "--out", str(tmp_path / "b"), "--quiet", "--log", "none", "--duration", "50",
-               "--baseline", "sumo"])
+    rc, _ = run_cfg(cfg, tmp_path / "b", "--duration", "50", "--baseline", "sumo")
     b = pd.read_csv(tmp_path / "b" / "vehicles.csv").set_index("id")
     assert rc == 0 and b.loc["last", "depart_speed_mps"] > 10.0  # SUMO's tripinfo departSpeed

@@ -5,7 +5,6 @@ edited) and files the tests write.
 """
 
 import gzip
-import json
 import shutil
 from pathlib import Path
 
@@ -21,26 +20,9 @@ from bridge.sumo_world import _vtype_classes
 from bridge.waypoints import load_net
 from sumo_nets.scenario import SUMO_DEFAULT_SEED, read_sumocfg
 from sumo_nets.sumo_tools import run_tool, sumo_home
+from tests.sumo_runs import run_cfg as _run, write_cfg as _cfg
 
 GAME = sumo_home() / "tools" / "game"
-
-
-def _cfg(path: Path, net: Path, *, routes=(), additional=(), begin=None, end=None, step=None,
-         extra="") -> Path:
-    def files(tag, fs):
-        return f'<{tag} value="{",".join(str(f) for f in fs)}"/>' if fs else ""
-
-    time = "".join(f'<{k} value="{v}"/>' for k, v in (("begin", begin), ("end", end), ("step-length", step))
-                   if v is not None)
-    path.write_text(f'<configuration><input><net-file value="{net}"/>{files("route-files", routes)}'
-                    f'{files("additional-files", additional)}</input>{"<time>" + time + "</time>" if time else ""}{extra}'
-                    f'</configuration>')
-    return path
-
-
-def _run(cfg, out, *extra):
-    rc = main(["run", str(cfg), "--out", str(out), "--quiet", "--log", "none", *extra])
-    return rc, json.loads((out / "summary.json").read_text())
 
 
 def test_game_square_runs_with_no_options_and_no_sumo_collision(tmp_path):

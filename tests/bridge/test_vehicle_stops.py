@@ -1,15 +1,14 @@
 """Planned stops (SUMO's ``<stop>``): the request rule (bridge.vehicle_stops, pure), the route
 files' stops (bridge.demand), and real SUMO runs where SUMO resolves bus stops itself."""
 
-import json
 
 import numpy as np
 import pandas as pd
 import pytest
 
-from bridge.cli import main
 from bridge.demand import DemandError, VehicleStop, read_demand
 from bridge.vehicle_stops import AT_REST_MPS, PlannedStop, StopBook, plan_stops
+from tests.sumo_runs import run_cfg, write_cfg
 
 
 def _step(book, t, k, index, speed, ids=("a",)):
@@ -107,15 +106,13 @@ def test_sumo_stops_are_served_as_sumo_serves_them(tmp_path, netgenerate_grid, c
     (tmp_path / "r.rou.xml").write_text(ROUTES)
     (tmp_path / "bs.add.xml").write_text('<additional><busStop id="bs" lane="B0C0_0" startPos="80" endPos="100"/>'
                                          '</additional>')
-    cfg = tmp_path / "s.sumocfg"
-    cfg.write_text('<configuration><input><net-file value="net.net.xml"/><route-files value="r.rou.xml"/>'
-                   '<additional-files value="bs.add.xml"/></input><time><begin value="0"/><end value="200"/></time>'
-                   '</configuration>')
+    cfg = write_cfg(tmp_path / "s.sumocfg", "net.net.xml", routes=["r.rou.xml"], additional=["bs.add.xml"],
+                    begin=0, end=200)
     runs = {}
     for name, extra in (("m", ["--controller", controller]), ("b", ["--baseline", "sumo"])):
         out = tmp_path / name
-        main(["run", str(cfg), "--out", str(out), "--quiet", "--log", "none", "--duration", "190", *extra])
-        runs[name] = (json.loads((out / "summary.json").read_text()), pd.read_csv(out / "vehicles.csv").set_index("id"))
+        runs[name] = (run_cfg(cfg, out, "--duration", "190", *extra)[1],
+                      pd.read_csv(out / "vehicles.csv").set_index("id"))
     s, v = runs["m"]
     assert s["complete"] and s["safe"], s.get("error") or s["safety_violations"]
     assert s["collisions_sumo"] == 0
