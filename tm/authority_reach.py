@@ -110,6 +110,22 @@ class AuthorityReach:
         vehicle at rest at its stop point (its standing claim)."""
         return _world_box(self.hold + 0.5 * self.length, self.hold_y + 0.5 * self.width, pad, *headings)
 
+    def corridor_polygons(self, W: np.ndarray, pad: np.ndarray, *headings: np.ndarray) -> np.ndarray:
+        """The corridor boxes of :meth:`half_extent` around waypoints ``W`` (n, 2) as oriented boxes,
+        one per waypoint and heading (not hulled into world boxes), each padded one-sided by ``pad``
+        (n, 4: back, front, right, left; SUMO's body reach there): corners (h n, 4, 2),
+        counter-clockwise."""
+        a = 0.5 * self.delta + self.hold + 0.5 * self.length
+        b = self.hold_y + 0.5 * self.width
+        pad = np.asarray(pad, dtype=float).reshape(-1, 4)
+        xs = np.stack([a + pad[:, 1], a + pad[:, 1], -a - pad[:, 0], -a - pad[:, 0]], axis=1)  # (n, 4)
+        ys = np.stack([-b - pad[:, 2], b + pad[:, 3], b + pad[:, 3], -b - pad[:, 2]], axis=1)
+        out = []
+        for h in headings:
+            c, s = np.cos(h)[:, None], np.sin(h)[:, None]
+            out.append(np.asarray(W, dtype=float)[:, None, :] + np.stack([c * xs - s * ys, s * xs + c * ys], axis=-1))
+        return np.concatenate(out)
+
     def half_extent(self, *headings: np.ndarray) -> np.ndarray:
         """World half extents (n, 2) of a corridor box around a waypoint at the headings: the hold
         box ``T^0 ⊕ footprint`` of every stop point within ``δ/2`` of it (module notes)."""

@@ -12,8 +12,9 @@ from __future__ import annotations
 import numpy as np
 
 from controllers.tolerances import SWEEP_MARGIN
+from tm.geometry import intersect_sat
 
-__all__ = ["BoxGrid", "GuardIndex", "corridor_hits", "boxes_meet"]
+__all__ = ["BoxGrid", "GuardIndex", "corridor_hits", "boxes_meet", "polygons_meet"]
 
 
 def _cells(lo: np.ndarray, hi: np.ndarray, cell: float):
@@ -120,3 +121,11 @@ def corridor_hits(zone_q, row_q, first, c_lo, c_hi, zone_b, row_b, b_lo, b_hi) -
 def boxes_meet(lo1: np.ndarray, hi1: np.ndarray, lo2: np.ndarray, hi2: np.ndarray) -> bool:
     """Whether any box ``(lo1[i], hi1[i])`` meets any box ``(lo2[j], hi2[j])`` (touching counts)."""
     return bool(np.any(np.all((lo1[:, None, :] <= hi2[None]) & (hi1[:, None, :] >= lo2[None]), axis=2)))
+
+
+def polygons_meet(P: np.ndarray, Q: np.ndarray) -> bool:
+    """Whether some convex polygon of ``P`` (p, m, 2) meets some of ``Q`` (q, m', 2), counter-clockwise
+    (separating axes, :func:`tm.geometry.intersect_sat`; touching counts), their bounding boxes first."""
+    lo, hi, q_lo, q_hi = P.min(axis=1), P.max(axis=1), Q.min(axis=1), Q.max(axis=1)
+    i, j = np.nonzero(np.all((lo[:, None, :] <= q_hi[None]) & (hi[:, None, :] >= q_lo[None]), axis=2))
+    return bool(len(i)) and bool(intersect_sat(P[i], Q[j]).any())

@@ -23,7 +23,7 @@ from hypothesis import given, settings, strategies as st
 from tm.authority_gate import AuthorityGate
 from tm.authority_reach import AuthorityReach
 from tm.boxes import boxes_meet
-from tm.junctions import JunctionFleet, Zone
+from tm.junctions import JunctionFleet, JunctionGate, Zone
 
 CAR = AuthorityReach(hold=0.25, hold_y=0.2, across=1.0, length=4.0, width=1.8, delta=1.0)
 J = Zone("J", (-5.0, -5.0), (5.0, 5.0))
@@ -862,3 +862,33 @@ def test_flat_intervals_gather_each_rows_intervals_in_order(counts, data):
             want = np.concatenate([own[i][j] for i in rows.tolist()]) if len(rows) else np.zeros(0)
             np.testing.assert_array_equal(got[j], want)
     assert len(asked) == len(set(asked))  # each vehicle's intervals asked for once
+
+
+def _diagonal(offset: float):
+    """A route along the 45 degree diagonal through J, ``offset`` m to its left (lanes side by side)."""
+    d, n = np.array([1.0, 1.0]) / np.sqrt(2.0), np.array([-1.0, 1.0]) / np.sqrt(2.0)
+    return _route(tuple(-30.0 * d + offset * n), tuple(60.0 * d + offset * n))
+
+
+@pytest.mark.parametrize("oriented", [True, False])
+def test_lanes_side_by_side_on_a_diagonal_road_hold_the_token_together(oriented):
+    """Two vehicles on lanes 3.2 m apart of a road at 45 degrees through a zone: their corridors'
+    world boxes overlap (each box's diagonal reaches across the gap), their oriented boxes do not,
+    so both take the token in the same round (A10KW's motorway merges took the one token in turn,
+    whatever the lane).  A vehicle crossing their road still waits for them.  With the world boxes
+    alone (``oriented`` False: the check the gate made before) only the first takes it."""
+    gate = _gate()
+    if not oriented:
+        gate.corridors_meet = lambda *a: JunctionGate.corridors_meet(gate, *a)
+    routes = {"A": _diagonal(-1.6), "B": _diagonal(1.6)}
+    probe = Scene({}, routes=routes)
+    entry = int(gate.intervals(probe.fleet(), 0)[1][0])
+    assert int(gate.intervals(probe.fleet(), 1)[1][0]) == entry  # the same entry line on both lanes
+    k = {"A": entry - 1, "B": entry - 1, "C": ENTRY - 1}
+    scene = Scene({"C": SOUTH}, k=k, routes=routes)
+    fleet = scene.fleet()
+    ra, rb = (gate.route_through(fleet, scene.ids.index(v), 0) for v in "AB")
+    assert boxes_meet(ra[2], ra[3], rb[2], rb[3])  # the world boxes overlap
+    gate.wait.update({(0, "A"): -3, (0, "B"): -2, (0, "C"): -1})
+    asked = scene.withhold(gate, t=0)
+    assert asked == ({"A", "B"} if oriented else {"A"}) and _holders(gate) == asked
