@@ -892,3 +892,28 @@ def test_lanes_side_by_side_on_a_diagonal_road_hold_the_token_together(oriented)
     gate.wait.update({(0, "A"): -3, (0, "B"): -2, (0, "C"): -1})
     asked = scene.withhold(gate, t=0)
     assert asked == ({"A", "B"} if oriented else {"A"}) and _holders(gate) == asked
+
+
+@pytest.mark.parametrize("turn_max_deg", [15.0, 30.0])
+def test_a_turning_corridor_keeps_its_world_boxes(turn_max_deg):
+    """Only through movements are compared as oriented boxes (``oriented_turn_max_deg``): lane A of
+    a diagonal road (lanes 3.5 m apart) turns 20 degrees right, away from lane B, inside the zone;
+    their oriented boxes miss, their world boxes meet.  With the default bound (15 degrees) A's
+    corridor keeps its world boxes and B waits for A (on ``grid`` seed 5, oriented boxes on turning
+    corridors locked 27 of 150); with a bound above its turn both take the token."""
+    gate = _gate()
+    gate.oriented_turn_max_deg = turn_max_deg
+    W1, H1 = _diagonal(-1.75)
+    cut = int(np.argmin(np.linalg.norm(W1 - W1[0] - 30.0 * np.array([1.0, 1.0]) / np.sqrt(2.0), axis=1)))
+    h = np.pi / 4 - np.deg2rad(20.0)
+    tail = W1[cut] + np.arange(1, 61)[:, None] * np.array([np.cos(h), np.sin(h)])
+    routes = {"A": (np.vstack([W1[:cut + 1], tail]), np.r_[H1[:cut + 1], np.full(60, h)]), "B": _diagonal(1.75)}
+    probe = Scene({}, routes=routes)
+    k = {v: int(gate.intervals(probe.fleet(), i)[1][0]) - 1 for i, v in enumerate("AB")}
+    scene = Scene({}, k=k, routes=routes)
+    fleet = scene.fleet()
+    ra, rb = (gate.route_through(fleet, scene.ids.index(v), 0) for v in "AB")
+    assert boxes_meet(ra[2], ra[3], rb[2], rb[3])
+    gate.wait.update({(0, "A"): -3, (0, "B"): -2})
+    asked = scene.withhold(gate, t=0)
+    assert asked == ({"A"} if turn_max_deg < 20.0 else {"A", "B"}) and _holders(gate) == asked
