@@ -56,9 +56,10 @@ changes is where they apply:
   manager lets one pass the other (opposite or parallel lanes); what can block a holder for ever
   is another one stopped in its path.  (With the moving claims' width, ``max |y|`` of every level
   plus ``W/2``, adjacent lanes' corridors meet: on ``grid``, 300 s, seeds 1 / 2: 88 / 77 of 150
-  arrived, against 104 / 97 with this width.)  Two corridors meet when their world boxes do and
-  then their oriented boxes, padded by SUMO's body reach (:meth:`AuthorityGate.corridors_meet`): on
-  a road not along an axis the world boxes of lanes side by side overlap;
+  arrived, against 104 / 97 with this width.)  Two corridors meet when their world boxes do and,
+  for through movements, their oriented boxes too, padded by SUMO's body reach
+  (:meth:`AuthorityGate.corridors_meet`): on a road not along an axis the world boxes of lanes side
+  by side overlap;
 * **chained zones** (:meth:`AuthorityGate._wanting`, :meth:`AuthorityGate._hand_out`): where a
   route enters the next zone's guard at or before the exit slot of the one it enters now, it
   cannot stop between them outside both; it asks for both tokens at once and gets both or
@@ -341,7 +342,6 @@ class AuthorityGate(JunctionGate):
         kept for a zone whose guard its claim has not reached yet are marked :attr:`ahead`."""
         ids = fleet.ids
         before = [set(h) for h in self.holders]
-        self._hand_out_clear()
         allowed = super()._hand_out(t, fleet, pos, wz, wrow)
         if not len(wrow):
             return allowed
@@ -638,6 +638,8 @@ class AuthorityGate(JunctionGate):
             slot = (W[last] - h, W[last] + h)
         self._routes[key] = found = (key, slot, corr_lo, corr_hi)
         turn = np.angle(np.exp(1j * (np.r_[H[idx], H[nxt]] - H[idx[0]])))
+        if len(self._corridor_boxes) > 100_000:  # stale keys: start over (holders' then count as world boxes)
+            self._corridor_boxes.clear()
         self._corridor_boxes[key] = (cls.corridor_polygons(W[idx], fleet.pad(row, idx), H[idx], H[nxt])
                                      if np.ptp(turn) <= np.deg2rad(self.oriented_turn_max_deg) else None)
         return found
@@ -665,7 +667,3 @@ class AuthorityGate(JunctionGate):
             hit = self._meet_oriented[pair] = polygons_meet(pa, pb)
         return hit
 
-    def _hand_out_clear(self) -> None:
-        """The corridors' oriented boxes go with the route cache (:meth:`JunctionGate._hand_out`)."""
-        if len(self._routes) > 100_000:
-            self._corridor_boxes.clear()
