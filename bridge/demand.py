@@ -11,8 +11,8 @@ vehicle at admission.  This module reads route files into that plan:
 * ``<route id=... edges=...>`` at top level, referenced by ``route="..."``;
 * ``<vehicle>`` with ``depart`` (seconds), ``type``, and either
   ``route="id"`` or a nested ``<route edges=...>``; ``departLane`` as a lane
-  index or one of SUMO's keywords (``best``, ``free``, ...: :func:`bridge.departure.depart_lane`
-  picks the lane); ``departPos`` in
+  index or one of SUMO's keywords (``best``, ``free``, ...: :class:`bridge.departure.DepartLanes`
+  picks the lane as SUMO would); ``departPos`` in
   metres (SUMO's front position on the first lane, negative: from its end) and
   ``departSpeed`` in m/s, or ``max``, ``desired``, ``speedLimit`` (as fast as the
   class and the lane allow there: ``inf`` on the plan).  The other keywords
@@ -129,7 +129,7 @@ class PlannedVehicle:
     depart_speed_mps: float | None = None
     stops: tuple["VehicleStop", ...] = ()
     #: a ``departLane`` keyword (``free``, ``best``, ``random``, ...; :data:`DEPART_LANE_WORDS`),
-    #: resolved at set-up by :func:`bridge.departure.depart_lane`; None: a number (``depart_lane``) or none
+    #: resolved at set-up by :class:`bridge.departure.DepartLanes`; None: a number (``depart_lane``) or none
     depart_lane_rule: str | None = None
 
 

@@ -564,18 +564,9 @@ def stop_closure(stopped, a, b):
     """:func:`tm.selection.propagate_stops`: the least superset of the stop mask ``stopped`` (n,) closed
     under ``g_a <= g_b`` for every edge (``a[e]`` stops when ``b[e]`` does), by a search from the
     stopped requesters along the edges reversed (the closure is unique: any order gives it)."""
-    n, m = len(stopped), len(a)
+    n = len(stopped)
     out = stopped.copy()
-    first = np.zeros(n + 1, dtype=np.int64)  # edges grouped by b: the a's that wait on each b
-    for e in range(m):
-        first[b[e] + 1] += 1
-    for v in range(n):
-        first[v + 1] += first[v]
-    fill = first[:n].copy()
-    waits = np.empty(m, dtype=np.int64)
-    for e in range(m):
-        waits[fill[b[e]]] = a[e]
-        fill[b[e]] += 1
+    first, waits = _incident(n, a, b)  # edges grouped by b: the a's that wait on each b
     todo = np.empty(n, dtype=np.int64)
     top = 0
     for v in range(n):
