@@ -36,7 +36,8 @@ import numpy as np
 from controllers.classes import VehicleClass
 from controllers.plant import DISTURBANCES, step as plant_step
 from controllers.settings import AUTHORITY_MAX_LEVELS, ControllerSettings, SynthesisSettings
-from controllers.speed_limits import SpeedSettings, free_flow_time, route_speeds
+from controllers import tolerances as tol
+from controllers.speed_limits import SpeedSettings, bound_at, free_flow_time, route_speeds
 from controllers.stmpc import STMPC
 from controllers.synthesis import synthesize
 from bridge.departure import DepartPlan, Start, start_ladder
@@ -783,12 +784,35 @@ class Cosim:
                 idx = g.ctl.index(X, cen, hd)
                 inside = np.flatnonzero(idx <= g.ctl.N)
                 if len(inside):
-                    out.append(Start(k, v, int(ks[inside[0]]), int(idx[inside[0]])))
+                    stop = int(ks[inside[0]])
+                    out.append(Start(k, v, stop, min(int(idx[inside[0]]) + self._start_slack(g, rs, k, v, stop),
+                                                     g.ctl.N)))
         vc = self.classes[sp.vclass]
         poses = [(W[st.k], float(Hw[st.k]), vc.length, vc.width, self.claims.spec_pads(sp, st.k)) for st in out]
         out.append(None)
         self._start_cache[sp.id] = (sp, out, poses)
         return out
+
+    def _start_slack(self, g: _Group, rs, k: int, v: float, stop: int) -> int:
+        """Tube levels a moving start (centre on waypoint ``k`` at ``v`` m/s, first stop point ``stop``)
+        keeps on top of its minimal index: the slack the loop keeps for a vehicle whose speed bound
+        binds (:meth:`bridge.groups._Group.slack`, :class:`controllers.speed_limits.SpeedSettings`),
+        0 where no bound of its route binds.
+
+        The minimal index is a minimum-time tube: held without a grant, it makes the vehicle progress
+        as if it drove at the class's speed bound.  The loop adds the slack only with a grant (its
+        index never rises), so a vehicle entering at its lane's limit whose first requests were
+        denied was forced above the limit (SUMO's ``A10KW``: truck8, a 19.44 m/s lane, 20.17 m/s).
+        Any ``l`` with ``x0 ∈ T^l`` is a valid tube (the sets are nested) and admission computes the
+        start's claims with this index (:meth:`bridge.fleet_claims.FleetClaims.entry_claims`)."""
+        if not float(np.min(rs.bound)) < g.v_max - tol.SPEED_BOUND_TOL:
+            return 0
+        K = len(rs.arc)
+        first = np.zeros(1, dtype=np.intp)  # one route, its rows 0 .. K - 1
+        front = rs.arc[k] + 0.5 * g.vclass.length + max(v, 0.0) * self.settings.Ts
+        cap, _ = bound_at(rs.arc, rs.bound, rs.env, rs.lane, first, first + K - 1, np.array([front]), g.decel)
+        return int(g.bound_slack((rs.arc, rs.bound, rs.env, rs.lane), first, first + K - 1, np.array([rs.arc[k]]),
+                                 np.array([float(v)]), np.array([rs.arc[stop]]), cap, self.settings.Ts)[0])
 
     def _enter(self, sp: VehicleSpec, t_s: float, start: Start | None = None) -> None:
         """Vehicle ``sp`` enters its group and the world at ``t_s``: at rest on its first waypoint, or at

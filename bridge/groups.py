@@ -195,12 +195,20 @@ class _Group:
         if not len(r):
             return out
         s, v = self._along(X)
-        s, v = s[r], v[r]
-        arc, bound, env, lane = self._tables()
         first, last = self.start[r], self.start[r] + self.K[r] - 1
-        stop = arc[first + np.minimum(self.k[r] + offset, self.K[r] - 1)]
+        stop = self._wbuf[first + np.minimum(self.k[r] + offset, self.K[r] - 1), _ARC]
+        out[r] = self.bound_slack(self._tables(), first, last, s[r], v[r], stop, np.asarray(cap)[r], Ts)
+        return out
+
+    def bound_slack(self, tables, first, last, s, v, stop, cap, Ts: float) -> np.ndarray:
+        """:meth:`slack` of vehicles of this class at centre arcs ``s`` with speeds ``v`` coming to rest
+        at centre arcs ``stop``, on the routes of speed tables ``tables`` (``(arc, bound, env, lane)``,
+        rows ``first .. last`` each; a group's buffer, or one route's :class:`RouteSpeeds` for a
+        vehicle not yet in the group: admission's start, :meth:`bridge.cosim.Cosim._starts`),
+        ``cap``: their speed bounds one step on (:meth:`speed_caps`); all of shape (V,)."""
+        arc, bound, env, lane = tables
         half = 0.5 * self.vclass.length
-        extra = np.zeros(len(r), dtype=np.intp)
+        extra = np.zeros(len(s), dtype=np.intp)
         # A bound b at S (front arc) slows the plan only if b^2 + 2 a_c S < 2 a_c (stop + L/2): the
         # braking to the stop is slower there otherwise.  Then the look-ahead bound at the front
         # now lies below the braking speed to the stop now, so the plans are needed only there.
@@ -210,9 +218,8 @@ class _Group:
             with_caps, without = plan_steps(s[need], v[need], stop[need], arc, bound, env, lane, first[need],
                                             last[need], half, self.decel, self.u_max, self.v_max, Ts)
             extra[need] = with_caps - without
-        bind = (extra > 0) | (np.asarray(cap)[r] < self.v_max - tol.SPEED_BOUND_TOL)
-        out[r] = np.where(bind, np.maximum(extra, 0) + self.slack_steps, 0)
-        return out
+        bind = (extra > 0) | (np.asarray(cap) < self.v_max - tol.SPEED_BOUND_TOL)
+        return np.where(bind, np.maximum(extra, 0) + self.slack_steps, 0)
 
     # ------------------------------------------------------------------ requests (design.md §2, step 1)
     def request(self, Ts: float, switching: str, authority: bool) -> tuple[np.ndarray, np.ndarray, float]:
