@@ -21,7 +21,9 @@ changes is where they apply:
 * **exit slot**: the first waypoint after the entry whose hold box misses the guard again.  With
   the token the stop point may move up to it (and on, outside the guard, without one); the token
   is handed out only with room there for the stopped vehicle: no other vehicle's claim on the
-  slot's hold box;
+  slot's hold box.  Where the slot's world box meets another vehicle's claims, their oriented boxes decide
+  (:meth:`AuthorityGate._slot_taken`, :attr:`JunctionFleet.claim_polygons`): on a road not along an
+  axis the world boxes of opposite lanes overlap;
 * **room for the claims' width** (:class:`tm.keep_out.KeepOut`):
   the exit slot's hold box is narrower than the claims a holder makes on its way there (the
   claims' across half-width plus ``W/2`` and the body padding across, ``T^0 + L/2`` past the slot
@@ -45,6 +47,12 @@ changes is where they apply:
   its stop point and that one's path misses its own: that one does not move until it has the
   token, and the candidate's claims through the zone would meet it (``grid`` seed 2: bus 84 took
   C1's token to turn left beside bus 80 at its entry line and never moved again);
+* **standing at a red** (:meth:`AuthorityGate._standing_hits`): a vehicle standing at a red light
+  in the guard (:meth:`JunctionGate.give_back`) holds back a candidate whose corridor beyond its stop
+  point (oriented boxes, padded) meets its hold box, not only one whose waypoints run into its claim:
+  with the token it would stand in the zone until the light turns green (SUMO's ``fkk_in``, whose
+  lights change only by hand: for good), and such a waiter is no one's reason to yield
+  (:meth:`_yields`): it takes no token meanwhile, through this zone or one chained to it;
 * **stalled holders** (:meth:`AuthorityGate._passable`): a holder whose stop point has not moved
   for :attr:`~AuthorityGate.stall_steps` steps holds back a candidate only where the candidate's
   corridor meets its standing box, not its whole corridor, and a waiter held back by stalled
@@ -172,6 +180,11 @@ class AuthorityGate(JunctionGate):
         #: route key -> the corridor's oriented boxes (:meth:`route_through`, :meth:`corridors_meet`)
         self._corridor_boxes: dict = {}
         self._meet_oriented: dict = {}  # (key, key) -> whether the oriented boxes meet
+        #: route key -> the exit slot's padded hold box as oriented boxes (:meth:`route_through`, :meth:`_slot_taken`)
+        self._slot_polys: dict = {}
+        #: over the run: exit slots whose world box met another vehicle's claims but whose oriented box did
+        #: not (:meth:`_slot_taken`)
+        self.slots_freed = 0
         #: over the run: requests withheld because their stop point would stand in a holder's path
         #: (:meth:`_keep_out`)
         self.wide_withheld = 0
@@ -182,6 +195,11 @@ class AuthorityGate(JunctionGate):
         #: over the run: candidates' corridors let past a stalled holder's standing box (:meth:`_passable`)
         self.stalled_passed = 0
         self._wide: dict = {}  # (vehicle, zone, waypoint, first) -> its wide path (:meth:`_wide_path`)
+        #: (vehicle, zone, waypoint) -> its wide path beyond its stop point as oriented boxes (:meth:`_wide_polygons`)
+        self._wide_poly: dict = {}
+        #: over the run: token hand-outs deferred because the candidate's wide path meets a vehicle standing
+        #: at a red in the guard (:meth:`_standing_hits`)
+        self.red_yielded = 0
         #: (vehicle, its path's entry and exit slot, leader, the leader's) -> whether they are the same lanes
         #: (:meth:`_follows`; the paths are pieces of the routes, which never change)
         self._lanes: dict = {}
@@ -592,6 +610,76 @@ class AuthorityGate(JunctionGate):
         return any(boxes_meet(W[idx] - r, W[idx] + r, b_lo, b_hi)
                    for r in (cls.half_extent(H[idx]), cls.half_extent(H[np.minimum(idx + 1, len(H) - 1)])))
 
+    def _slot_taken(self, fleet: JunctionFleet, keys: list, rows: np.ndarray) -> np.ndarray:
+        """:meth:`JunctionGate._slot_taken` with oriented boxes: an exit slot whose world box meets
+        the world box of another vehicle's claims is taken only when the slot's padded hold box and
+        that vehicle's claims (:attr:`JunctionFleet.claim_polygons`) meet as oriented boxes.  On a
+        road not along an axis the world boxes of opposite lanes overlap: on SUMO's ``fkk_in`` a car
+        turning right onto the diagonal ``-148050455#0`` never found its exit slot free while a queue
+        stood on ``148050455#0`` beside it, and with it waited every vehicle behind."""
+        out = np.ones(len(rows), dtype=bool)
+        if fleet.claim_polygons is None:
+            return out
+        for i, (key, j) in enumerate(zip(keys, rows.tolist())):
+            mine = self._slot_polys.get(key)
+            if mine is not None and not polygons_meet(mine, fleet.claim_polygons(j)):
+                out[i] = False
+                self.slots_freed += 1
+        return out
+
+    def _standing_hits(self, fleet: JunctionFleet, zq: np.ndarray, rq: np.ndarray, first: np.ndarray,
+                       c_lo: np.ndarray, c_hi: np.ndarray, zs: np.ndarray, rs: np.ndarray) -> np.ndarray:
+        """:meth:`JunctionGate._standing_hits`, and a candidate whose wide path beyond its stop point
+        (:meth:`_wide_polygons`: the claims it will make through the zone, padded, as oriented boxes)
+        meets the oriented hold box of a vehicle standing at a red in the guard cannot pass it either:
+        the traffic manager would deny those claims for as long as the light stays red, and the
+        candidate would stand inside the guard with the token, holding back every waiter whose
+        corridor meets its own (SUMO's ``fkk_in``, whose lights change only by hand: bicycle
+        ``4_left.1`` took ``gneJ21``'s token to turn left past the front of car ``4_right.0`` at its
+        red, stopped 0.7 m short of its bumper's line and held the token for the rest of the run)."""
+        hits = super()._standing_hits(fleet, zq, rq, first, c_lo, c_hi, zs, rs)
+        for q in np.flatnonzero(~hits).tolist():
+            z, row = int(zq[q]), int(rq[q])
+            near = rs[(zs == z) & (rs != row)]
+            if not len(near):
+                continue
+            mine = self._wide_polygons(fleet, row, z)
+            if mine is None:
+                continue
+            lo, hi = mine.min(axis=(0, 1)), mine.max(axis=(0, 1))
+            near = near[np.all((fleet.claim_lo[near] <= hi) & (fleet.claim_hi[near] >= lo), axis=1)]
+            if any(polygons_meet(mine, self._standing_polygons(fleet, int(j))) for j in near.tolist()):
+                hits[q] = True
+                self.red_yielded += 1
+        return hits
+
+    def _wide_polygons(self, fleet: JunctionFleet, row: int, z: int) -> np.ndarray | None:
+        """Row ``row``'s wide path through zone ``z`` beyond its stop point (the boxes of
+        :meth:`_wide_path` from the next waypoint on) as oriented boxes (h n, 4, 2), each waypoint's at
+        its arriving and leaving headings; None when the route does not leave the guard from there."""
+        W, H, k = fleet.route(row)
+        key = (fleet.ids[row], z, k)
+        found = self._wide_poly.get(key, _UNSET)
+        if found is _UNSET:
+            if len(self._wide_poly) > 100_000:  # stale keys: start over
+                self._wide_poly.clear()
+            span = self._span_of(fleet, row, z, k + 1) or self._span_of(fleet, row, z, k)
+            found = None
+            if span is not None and span[2] and k + 1 <= span[1]:
+                idx = np.arange(k + 1, span[1] + 1)
+                found = self.classes[fleet.family[row]].corridor_polygons(W[idx], fleet.pad(row, idx), H[idx],
+                                                                          H[np.minimum(idx + 1, len(H) - 1)])
+            self._wide_poly[key] = found
+        return found
+
+    def _standing_polygons(self, fleet: JunctionFleet, row: int) -> np.ndarray:
+        """Row ``row`` at rest at its stop point: its padded hold box as oriented boxes (2, 4, 2), at
+        the stop point's arriving and leaving headings."""
+        W, H, k = fleet.route(row)
+        idx = np.array([k])
+        return self.classes[fleet.family[row]].hold_polygons(W[idx], fleet.pad(row, idx), H[idx],
+                                                            H[np.minimum(idx + 1, len(H) - 1)])
+
     def _passable(self, fleet: JunctionFleet, pos: dict, t: int, holder: str, row: int, z: int) -> bool:
         """A candidate may take the token beside a holder whose corridor its own meets when that
         holder is stalled (:meth:`_stalled`: its stop point has not moved for :attr:`stall_steps`
@@ -636,6 +724,10 @@ class AuthorityGate(JunctionGate):
         if exits:
             h = cls.hold_half(H[last:last + 1], H[nxt[-1]:nxt[-1] + 1])[0]
             slot = (W[last] - h, W[last] + h)
+            if len(self._slot_polys) > 100_000:  # stale keys: start over (then taken as world boxes)
+                self._slot_polys.clear()
+            self._slot_polys[key] = cls.hold_polygons(W[last:last + 1], fleet.pad(row, idx[-1:]), H[last:last + 1],
+                                                      H[nxt[-1]:nxt[-1] + 1])
         self._routes[key] = found = (key, slot, corr_lo, corr_hi)
         turn = np.angle(np.exp(1j * (np.r_[H[idx], H[nxt]] - H[idx[0]])))
         if len(self._corridor_boxes) > 100_000:  # stale keys: start over (holders' then count as world boxes)

@@ -44,6 +44,20 @@ def _world_half(a: float, b: float, *headings: np.ndarray) -> np.ndarray:
     return out
 
 
+def _polygons(a: float, b: float, W: np.ndarray, pad: np.ndarray, *headings: np.ndarray) -> np.ndarray:
+    """Segment-frame boxes ``±a`` along, ``±b`` across around waypoints ``W`` (n, 2), padded one-sided
+    by ``pad`` (n, 4: back, front, right, left), one per waypoint and heading: corners (h n, 4, 2),
+    counter-clockwise."""
+    pad = np.asarray(pad, dtype=float).reshape(-1, 4)
+    xs = np.stack([a + pad[:, 1], a + pad[:, 1], -a - pad[:, 0], -a - pad[:, 0]], axis=1)  # (n, 4)
+    ys = np.stack([-b - pad[:, 2], b + pad[:, 3], b + pad[:, 3], -b - pad[:, 2]], axis=1)
+    out = []
+    for h in headings:
+        c, s = np.cos(h)[:, None], np.sin(h)[:, None]
+        out.append(np.asarray(W, dtype=float)[:, None, :] + np.stack([c * xs - s * ys, s * xs + c * ys], axis=-1))
+    return np.concatenate(out)
+
+
 @dataclass(frozen=True, eq=False)
 class AuthorityReach:
     """What the junction layer needs of a movement-authority class (metres).
@@ -115,16 +129,16 @@ class AuthorityReach:
         one per waypoint and heading (not hulled into world boxes), each padded one-sided by ``pad``
         (n, 4: back, front, right, left; SUMO's body reach there): corners (h n, 4, 2),
         counter-clockwise."""
-        a = 0.5 * self.delta + self.hold + 0.5 * self.length
-        b = self.hold_y + 0.5 * self.width
-        pad = np.asarray(pad, dtype=float).reshape(-1, 4)
-        xs = np.stack([a + pad[:, 1], a + pad[:, 1], -a - pad[:, 0], -a - pad[:, 0]], axis=1)  # (n, 4)
-        ys = np.stack([-b - pad[:, 2], b + pad[:, 3], b + pad[:, 3], -b - pad[:, 2]], axis=1)
-        out = []
-        for h in headings:
-            c, s = np.cos(h)[:, None], np.sin(h)[:, None]
-            out.append(np.asarray(W, dtype=float)[:, None, :] + np.stack([c * xs - s * ys, s * xs + c * ys], axis=-1))
-        return np.concatenate(out)
+        return _polygons(0.5 * self.delta + self.hold + 0.5 * self.length, self.hold_y + 0.5 * self.width,
+                         W, pad, *headings)
+
+    def claim_polygons(self, W: np.ndarray, pad: np.ndarray, *headings: np.ndarray) -> np.ndarray:
+        """:meth:`claim_box` around waypoints ``W`` as oriented boxes (as :meth:`corridor_polygons`)."""
+        return _polygons(self.hold + 0.5 * self.length, self.across + 0.5 * self.width, W, pad, *headings)
+
+    def hold_polygons(self, W: np.ndarray, pad: np.ndarray, *headings: np.ndarray) -> np.ndarray:
+        """:meth:`hold_box` around waypoints ``W`` as oriented boxes (as :meth:`corridor_polygons`)."""
+        return _polygons(self.hold + 0.5 * self.length, self.hold_y + 0.5 * self.width, W, pad, *headings)
 
     def half_extent(self, *headings: np.ndarray) -> np.ndarray:
         """World half extents (n, 2) of a corridor box around a waypoint at the headings: the hold

@@ -129,6 +129,10 @@ class JunctionFleet:
         (m, 4)) the claims of fleet row ``rows[i]`` add to its footprint at its route's waypoint
         ``idx[i]`` (``rows``, ``idx`` int arrays (m,); SUMO's bodies, :mod:`bridge.sumo_body`);
         None: no padding.
+    claim_polygons : callable or None
+        ``claim_polygons(row)``: oriented boxes (m, 4, 2), counter-clockwise, whose union holds every
+        current claim of fleet row ``row`` (:func:`tm.reach.claim_polygons`); None: only the world
+        boxes ``claim_lo, claim_hi`` are known.
     """
 
     ids: list
@@ -137,6 +141,7 @@ class JunctionFleet:
     claim_hi: np.ndarray
     parts: tuple
     pads: object = None
+    claim_polygons: object = None
 
     def pad(self, row: int, idx: np.ndarray) -> np.ndarray:
         """The padding (m, 4) ``(back, front, right, left)`` of row ``row`` at waypoints ``idx``
@@ -359,6 +364,7 @@ class JunctionGate:
                 # (nor a vehicle whose route does not pass through the zone: it never drives onto its
                 # exit road, and its claim's box is there only beside it: ``through``)
                 other = (bj != wrow[P[qs[qi]]]) & self.passes([ids[j] for j in bj.tolist()], wz[P[qs[qi]]])
+                other[other] = self._slot_taken(fleet, [routes[q][0] for q in qs[qi[other]].tolist()], bj[other])
                 blocked_exit[qs[qi[other]]] = True
             first = np.r_[0, np.cumsum(c_len)]
             zP = wz[P]
@@ -372,9 +378,8 @@ class JunctionGate:
                                          gz_[keep & ~stand][o], gi_[keep & ~stand][o], cur_lo, cur_hi)
             if (keep & stand).any():  # standing at a red: only routes running into its claim
                 o = np.argsort(gz_[keep & stand], kind="stable")
-                mid = 0.5 * (c_lo + c_hi)  # the corridor's waypoints
-                blocked_intr |= corridor_hits(zP, wrow[P], first, mid, mid,
-                                              gz_[keep & stand][o], gi_[keep & stand][o], cur_lo, cur_hi)
+                blocked_intr |= self._standing_hits(fleet, zP, wrow[P], first, c_lo, c_hi,
+                                                    gz_[keep & stand][o], gi_[keep & stand][o])
             # In order of waiting, per zone: a candidate with room beyond the zone (do not block
             # the box: a holder stuck in a queue inside the guard would stall everyone) gets a
             # token if its corridor misses every holder's, so holders never meet inside the
@@ -382,6 +387,7 @@ class JunctionGate:
             # corridor meets a holder's ends the round (nobody overtakes it into the zone, so it
             # is served once those holders have left).
             cid = [ids[i] for i in wrow[P].tolist()]
+            stuck = np.isin(wrow[P], wrow[P][blocked_intr])
             since = np.array([wait.setdefault((z, v), t) for z, v in zip(zP.tolist(), cid)])
             # candidates by zone, then by waiting, then by id; those without room at the exit slot
             # are skipped (unless they follow holders on their path: :meth:`_follows`)
@@ -407,7 +413,9 @@ class JunctionGate:
                     if not all(self._stalled(t, h) for h in meet):  # else it holds nobody back
                         blocked.append((key_q, lo_q, hi_q))
                     continue
-                if self._yields(fleet, row_q, z, wrow[P[zP == z]]):
+                # (not to a waiter that cannot pass a claim in its corridor, through this zone or one
+                # chained to it: it takes no token meanwhile)
+                if self._yields(fleet, row_q, z, wrow[P[(zP == z) & ~stuck]]):
                     continue
                 holders[cid[q]] = (key_q, lo_q, hi_q)
                 allowed[P[q]] = True
@@ -415,6 +423,20 @@ class JunctionGate:
                 if cid[q] in self.given_back:
                     self.given_back[cid[q]].discard(z)
         return allowed
+
+    def _slot_taken(self, fleet: JunctionFleet, keys: list, rows: np.ndarray) -> np.ndarray:
+        """Whether each candidate's exit slot (its route key, :meth:`route_through`), whose box meets
+        the world box of row ``rows[i]``'s current claims, is taken by them: here, always."""
+        return np.ones(len(rows), dtype=bool)
+
+    def _standing_hits(self, fleet: JunctionFleet, zq: np.ndarray, rq: np.ndarray, first: np.ndarray,
+                       c_lo: np.ndarray, c_hi: np.ndarray, zs: np.ndarray, rs: np.ndarray) -> np.ndarray:
+        """Which candidates (zone ``zq``, row ``rq``, corridor boxes ``c_lo[first[q]:first[q+1]]``)
+        cannot pass the vehicles standing at a red light in the guard (zone ``zs``, row ``rs``, sorted
+        by zone): a waypoint of the corridor lies inside one's current claim box (its queue runs into
+        it); a corridor that merely brushes it (the next lane, whose light is green) is let through."""
+        mid = 0.5 * (c_lo + c_hi)  # the corridor's waypoints
+        return corridor_hits(zq, rq, first, mid, mid, zs, rs, fleet.claim_lo, fleet.claim_hi)
 
     def _passable(self, fleet: JunctionFleet, pos: dict, t: int, holder: str, row: int, z: int) -> bool:
         """Whether candidate row ``row``, whose corridor through zone ``z`` meets holder ``holder``'s,

@@ -52,7 +52,8 @@ from tm.kernels import reach_boxes, timed_pairs_plain, timed_pairs_tight, union_
 from tm.slot_boxes import SlotBoxes
 
 __all__ = ["ReachModel", "ReachClaims", "reach_claims", "reach_claims_many", "claims_conflict", "pairwise_conflicts",
-           "world_aabb", "candidate_pairs", "pad_slots", "split_pad", "slot_aabb", "union_aabb", "PREFILTER_TOL_FACTOR"]
+           "world_aabb", "claim_polygons", "candidate_pairs", "pad_slots", "split_pad", "slot_aabb", "union_aabb",
+           "PREFILTER_TOL_FACTOR"]
 
 #: The per-slot world bounding boxes that pre-filter the ``timed`` check are compared with
 #: ``PREFILTER_TOL_FACTOR * tol``: two oriented boxes that the separating-axis test with ``tol``
@@ -494,6 +495,20 @@ def world_aabb(claims: ReachClaims) -> tuple[np.ndarray, np.ndarray]:
     half = 0.5 * (hi - lo)
     ext = np.column_stack([c * half[:, 0] + s * half[:, 1], s * half[:, 0] + c * half[:, 1]])
     return mid - ext, mid + ext
+
+
+def claim_polygons(claims: ReachClaims, row: int) -> np.ndarray:
+    """Oriented boxes (m, 4, 2), counter-clockwise, whose union is vehicle ``row``'s ``∪_k S_k``: the
+    boxes of its slots (:meth:`ReachClaims.slot_union`), each once."""
+    u = claims.slot_union()
+    st, ct = u.start[row], u.count[row]
+    idx = np.unique(np.concatenate([np.arange(a, a + c) for a, c in zip(st.tolist(), ct.tolist())] or
+                                   [np.zeros(0, dtype=np.intp)])).astype(np.intp)
+    c, s = np.cos(u.heading[idx])[:, None], np.sin(u.heading[idx])[:, None]
+    hx, hy = u.half[idx, 0:1], u.half[idx, 1:2]
+    xs = np.hstack([-hx, hx, hx, -hx])
+    ys = np.hstack([-hy, -hy, hy, hy])
+    return u.centre[idx][:, None, :] + np.stack([c * xs - s * ys, s * xs + c * ys], axis=-1)
 
 
 def candidate_pairs(lo_a, hi_a, lo_b, hi_b, tol: float = GEOMETRY_TOL) -> tuple[np.ndarray, np.ndarray]:

@@ -917,3 +917,96 @@ def test_a_turning_corridor_keeps_its_world_boxes(turn_max_deg):
     gate.wait.update({(0, "A"): -3, (0, "B"): -2})
     asked = scene.withhold(gate, t=0)
     assert asked == ({"A"} if turn_max_deg < 20.0 else {"A", "B"}) and _holders(gate) == asked
+
+
+# ----------------------------------------------------------------------------- standing at a red
+def test_a_candidate_whose_corridor_meets_a_car_at_a_red_waits_without_the_token():
+    """SUMO's ``fkk_in`` (lights changed only by hand): a bicycle took ``gneJ21``'s token to turn left
+    past the front of a car standing at its red, stopped short of it (the manager denied its claims)
+    and held the token for the rest of the run.  R stands at a red on the north-bound lane inside
+    the guard, its hold box up to y = -2.25 (-4.5 + 2.25); C, east-bound at y = -1.6 and waiting at
+    its entry line, has a corridor ``hold_y + W/2`` = 1.1 m either side of its waypoints (down to
+    y = -2.7): no waypoint of C's lies in R's box, but the corridor meets it.  C waits (counted
+    ``red_yielded``) and takes the token once R's light is green (R no longer standing: then R's
+    claim is an ordinary intruder, and C waits for it as before: here R moved off).  With R 1.5 m
+    further south (hold box up to y = -3.75) C's corridor misses it and C takes the token at once;
+    with the rule of :class:`JunctionGate` alone (waypoints in the box) C takes it beside R."""
+    def run(r_y, gate=None):
+        gate = gate or _gate()
+        north = ((1.6, r_y - 20.0), (1.6, 60.0))
+        scene = Scene({"C": EAST, "R": north}, k={"C": ENTRY - 1, "R": 20}, idle="R")
+        gate.give_back(["R"])  # R stands at a red (tm.signals)
+        return gate, scene.withhold(gate)
+
+    gate, asked = run(-4.5)
+    assert asked == set() and _holders(gate) == set() and gate.red_yielded == 1
+    gate, asked = run(-6.0)
+    assert asked == {"C"} == _holders(gate) and gate.red_yielded == 0
+    gate = _gate()
+    gate._standing_hits = lambda *a: JunctionGate._standing_hits(gate, *a)  # the base rule alone
+    gate, asked = run(-4.5, gate)
+    assert asked == {"C"} == _holders(gate)
+
+
+def test_a_waiter_does_not_yield_to_one_that_waits_for_a_car_at_a_red():
+    """The hand-out of :func:`test_a_turning_candidate_lets_a_waiter_beside_its_path_go_first`, with R
+    standing at a red on B's lane inside the guard, ahead of B (B's corridor runs into R's box: B
+    waits for R, not for the token, and takes none).  A yielded to B, for as long as R's light
+    stayed red (SUMO's ``fkk_in``: ``1_horizontal.0`` let ``3_right.1`` go first for 120 s, which
+    waited behind a car at a red).  Now A takes the token; without R, A yields to B as before."""
+    routes = {"A": _right_turn_east_to_north(), "B": _route(*SOUTH), "R": _route(*SOUTH)}
+    family, reach = {"A": "truck", "B": "narrow", "R": "narrow"}, {"truck": TRUCK, "narrow": NARROW}
+    for with_r in (True, False):
+        gate = AuthorityGate([J], {"narrow": NARROW, "truck": TRUCK})
+        rs = routes if with_r else {v: routes[v] for v in "AB"}
+        entry = {v: int(gate.intervals(Scene({}, routes={v: routes[v]}, family=family, reach=reach).fleet(), 0)[1][0])
+                 for v in "AB"}
+        k = {"A": entry["A"] - 1, "B": entry["B"] - 1, "R": entry["B"] + 6}
+        if with_r:
+            gate.give_back(["R"])
+        scene = Scene({}, routes=rs, k={v: k[v] for v in rs}, idle="R", family=family, reach=reach)
+        asked = scene.withhold(gate)
+        assert (asked == {"A"} == _holders(gate)) == with_r, (with_r, asked)
+        assert (gate.yielded > 0) != with_r
+
+
+def _diagonal_exit():
+    """East-bound on y = -1.6 to x = 0, then north-east (45 degrees) from (0, -1.6)."""
+    W1, H1 = _route((-30.0, -1.6), (0.0, -1.6))
+    W2, H2 = _route((0.0, -1.6), (60.0 / np.sqrt(2), -1.6 + 60.0 / np.sqrt(2)))
+    return np.vstack([W1, W2[1:]]), np.r_[H1, H2[1:]]
+
+
+def test_an_exit_slot_on_a_diagonal_road_is_free_beside_the_opposite_lane():
+    """SUMO's ``fkk_in``: a car turning onto the diagonal road ``-148050455#0`` never found its exit
+    slot free while a queue stood on the opposite lane ``148050455#0``: on a road not along an axis
+    the world boxes of lanes side by side overlap.  C exits J onto a 45-degree road; Q stands on the
+    lane to its left (3.2 m across, south-west bound) beside C's exit slot.  The world boxes of the
+    slot and of Q's claim meet, their oriented boxes do not: with the claims' oriented boxes
+    (:attr:`JunctionFleet.claim_polygons`) C takes the token (``slots_freed``); with world boxes
+    only, it waits.  Q on C's own lane, on the slot, takes it in both."""
+    gate = _gate()
+    W, H = _diagonal_exit()
+    fleet0 = Scene({}, routes={"C": (W, H)}).fleet()
+    entry, slot = (int(a[0]) for a in gate.intervals(fleet0, 0)[1:3])
+    left = np.array([-np.sin(H[-1]), np.cos(H[-1])])
+    for shift, taken in ((3.2, False), (0.0, True)):
+        q = W[slot] + shift * left
+        ahead = 30.0 * np.array([np.cos(H[-1]), np.sin(H[-1])])
+        Wq, Hq = _route(q + ahead, q - ahead)
+        kq = int(np.argmin(np.linalg.norm(Wq - q, axis=1)))
+        for oriented in (True, False):
+            gate = _gate()
+            scene = Scene({}, routes={"C": (W, H), "Q": (Wq, Hq)}, k={"C": entry - 1, "Q": kq}, idle="Q")
+            fleet = scene.fleet()
+            lo_q, hi_q = scene.hold_box(1)
+            half = CAR.hold_half(H[slot:slot + 1])[0]
+            lo_s, hi_s = W[slot] - half, W[slot] + half
+            assert boxes_meet(lo_q[None], hi_q[None], lo_s[None], hi_s[None])  # the world boxes meet
+            if oriented:
+                fleet = replace(fleet, claim_polygons=lambda row, s=scene: CAR.hold_polygons(
+                    s.routes[row][0][s.k[row]][None], np.zeros((1, 4)), s.routes[row][1][s.k[row]:s.k[row] + 1]))
+            req = gate.withhold(0, fleet, scene.requesting, np.zeros((1, 2)), np.zeros((1, 2)))
+            got = "C" in _holders(gate)
+            assert got == (oriented and not taken), (shift, oriented, req)
+            assert gate.slots_freed == int(got)

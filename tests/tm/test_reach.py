@@ -330,3 +330,35 @@ def test_drawn_polygon_holds_every_slot_box(seed, n):
         A, c = halfspaces(P[i])
         for k in full:
             assert np.all(claims.world_corners(i, k + 1) @ A.T <= c + 1e-9)
+
+
+@hsettings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2 ** 31), n=st.integers(1, 6))
+def test_claim_polygons_are_the_slot_boxes_each_once(seed, n):
+    """tm.reach.claim_polygons (the junction gate's oriented view of a vehicle's claims): for random
+    boxes, headings, empty and repeated slots, the polygons of vehicle ``i`` are its non-empty slot
+    boxes' world corners (``world_corners``, counter-clockwise), each box once (a repeated slot
+    shares its box in the claims' :class:`~tm.slot_boxes.SlotBoxes`: counted once), within 1e-9 m
+    (the same rotation, a sum's rounding apart); with tight boxes (:class:`SlotBoxes`) too."""
+    from tm.reach import ReachClaims, claim_polygons
+    from tm.slot_boxes import SlotBoxes
+
+    rng = np.random.default_rng(seed)
+    K = 7
+    a = rng.uniform(-20, 20, (n, K, 2))
+    lo, hi = a, a + rng.uniform(0.1, 10, (n, K, 2))
+    empty = rng.random((n, K)) < 0.3
+    lo[empty], hi[empty] = np.inf, -np.inf
+    claims = ReachClaims(rng.uniform(-100, 100, (n, 2)), rng.uniform(-np.pi, np.pi, n), lo, hi)
+    u = SlotBoxes.from_frames(claims.centre, claims.heading, lo, hi)
+    rep = np.concatenate([u.start[:, :1], u.start[:, :-1]], axis=1)  # slot k takes slot k - 1's box
+    tight = ReachClaims(claims.centre, claims.heading, lo, hi, SlotBoxes(u.centre, u.heading, u.half, rep, u.count))
+    for i in range(n):
+        full = [k for k in range(K) if not empty[i, k]]
+        P = claim_polygons(claims, i)
+        assert P.shape == (len(full), 4, 2)
+        for q, k in enumerate(full):
+            np.testing.assert_allclose(P[q], claims.world_corners(i, k + 1), rtol=0, atol=1e-9)
+        T = claim_polygons(tight, i)
+        want = sorted({int(rep[i, k]) for k in range(K) if u.count[i, k]})
+        assert len(T) == len(want)
