@@ -209,16 +209,23 @@ class _Group:
         arc, bound, env, lane = tables
         half = 0.5 * self.vclass.length
         extra = np.zeros(len(s), dtype=np.intp)
+        slower = np.zeros(len(s), dtype=bool)
         # A bound b at S (front arc) slows the plan only if b^2 + 2 a_c S < 2 a_c (stop + L/2): the
         # braking to the stop is slower there otherwise.  Then the look-ahead bound at the front
         # now lies below the braking speed to the stop now, so the plans are needed only there.
         now, _ = bound_at(arc, bound, env, lane, first, last, s + half, self.decel)
         need = np.flatnonzero(now ** 2 < 2.0 * self.decel * np.maximum(stop - s, 0.0) + tol.SPEED_BOUND_TOL)
         if len(need):
-            with_caps, without = plan_steps(s[need], v[need], stop[need], arc, bound, env, lane, first[need],
-                                            last[need], half, self.decel, self.u_max, self.v_max, Ts)
+            with_caps, without, t_with, t_without = plan_steps(
+                s[need], v[need], stop[need], arc, bound, env, lane, first[need], last[need], half, self.decel,
+                self.u_max, self.v_max, Ts, seconds=True)
             extra[need] = with_caps - without
-        bind = (extra > 0) | (np.asarray(cap) < self.v_max - tol.SPEED_BOUND_TOL)
+            # a bound binds where it slows the plan at all, not only by a whole step: rounded, a stretch
+            # costing less than a step read as free, the request carried no slack and its grant was a
+            # minimum-time tube the loop cannot widen (SUMO's grid6: topBottom.3, 12.71 m/s on an
+            # 11.09 m/s lane, granted at its horizon 30 m past the lane's start)
+            slower[need] = t_with > t_without + tol.PLAN_SLOWER_TOL_S
+        bind = (extra > 0) | slower | (np.asarray(cap) < self.v_max - tol.SPEED_BOUND_TOL)
         return np.where(bind, np.maximum(extra, 0) + self.slack_steps, 0)
 
     # ------------------------------------------------------------------ requests (design.md §2, step 1)

@@ -301,7 +301,7 @@ def free_flow_time(arc: np.ndarray, lane: np.ndarray, front_offset: float) -> fl
 
 def plan_steps(s0: np.ndarray, v0: np.ndarray, stop: np.ndarray, arc, bound, env, lane, first, last,
                front_offset, decel, accel: float, v_max: float, Ts: float,
-               samples: int = 24) -> tuple[np.ndarray, np.ndarray]:
+               samples: int = 24, seconds: bool = False) -> tuple[np.ndarray, ...]:
     """Steps (ceil, >= 0) a vehicle at centre arc ``s0`` with speed ``v0`` needs to come to rest at
     ``stop`` (centre arc), accelerating at ``accel`` and braking at ``decel`` at the end: driving
     at the bound with look-ahead (:func:`bound_at`, front ``front_offset`` m ahead), and at
@@ -313,6 +313,8 @@ def plan_steps(s0: np.ndarray, v0: np.ndarray, stop: np.ndarray, arc, bound, env
     Returns
     -------
     with_bounds, without : ndarray of int, shape (V,)
+    t_with, t_without : ndarray of float, shape (V,)
+        Only with ``seconds``: the two plans' durations (s) before rounding up to steps.
     """
     s0 = np.asarray(s0, dtype=float)
     V = len(s0)
@@ -327,8 +329,9 @@ def plan_steps(s0: np.ndarray, v0: np.ndarray, stop: np.ndarray, arc, bound, env
     free = np.minimum(np.minimum(brake, v_max),
                       np.sqrt(np.maximum(v0, 0.0)[:, None] ** 2 + 2.0 * accel * (mid - s0[:, None])))
     last_piece = np.sqrt(2.0 * ds / a_c)
-    out = []
+    out, secs = [], []
     for v in (np.minimum(free, cap.reshape(V, samples)), free):
         t = np.sum(ds[:, None] / np.maximum(v[:, :-1], 1e-3), axis=1) + last_piece
         out.append(np.ceil(t / Ts).astype(np.intp))
-    return out[0], out[1]
+        secs.append(t)
+    return (out[0], out[1], secs[0], secs[1]) if seconds else (out[0], out[1])

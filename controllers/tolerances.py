@@ -110,3 +110,8 @@ PATH_COLLINEAR_TOL_M = 1e-9
 #: changes by more is kept when collinear runs merge.  Leans computed from SUMO's body on one lane
 #: change differ by round-off (~1e-12 rad).
 PATH_LEAN_TOL_RAD = 1e-6
+
+#: Seconds a speed bound must add to a vehicle's plan to its stop point for the bound to count as
+#: binding (:meth:`bridge.groups._Group.bound_slack`): any cost above float noise, since the plan's
+#: whole steps round a cost below one step to none.
+PLAN_SLOWER_TOL_S = 1e-6

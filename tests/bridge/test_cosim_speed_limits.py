@@ -97,3 +97,45 @@ def test_bad_limits_name_the_vehicle():
         Cosim(builtin_classes(), [VehicleSpec("v8", "car", W, speed_limits=np.ones(3))], CosimSettings())
     with pytest.raises(ValueError, match="CosimSettings.speed"):
         CosimSettings(speed=2.0)
+
+
+
+def test_a_stretch_costing_less_than_a_step_still_binds_the_request():
+    """A car cruising at 13.89 m/s asks for a stop point 43.5 m ahead, past an 11.09 m/s stretch
+    that starts 18 m ahead of its front (SUMO's grid6: topBottom.3 granted at its horizon 52 m
+    before its stop, 30 m past the start of an 11.09 m/s lane).  The stretch makes its plan to the
+    stop 0.03 s slower: less than a step, so rounded to whole steps it cost nothing, and the look-ahead
+    bound one step on is still 13.89: the request carried no slack.  Granted at its minimal index (a
+    minimum-time tube) with no room to add slack later (the loop adds it only with a grant; the next
+    request with slack did not fit in N), topBottom.3 was driven to 12.71 m/s on the 11.09 m/s lane
+    (speed_limit_excess_max 1.62).  Now a bound that slows the plan at all binds: the request
+    carries the slack and, not fitting in N, is not made (the car keeps its nearer stop point)."""
+    from bridge.cosim import Cosim, CosimSettings, VehicleSpec
+    from bridge.layouts import subsample
+    from controllers.classes import builtin_classes
+    from controllers.speed_limits import plan_steps
+
+    classes = builtin_classes()
+    car = classes["car"]
+    W = subsample(np.array([[0.0, 0.0], [300.0, 0.0]]), car.model.delta)
+    arc = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(W, axis=0).T))])
+    lim = np.where((arc >= 146.0) & (arc <= 159.0), 11.09, 13.89)
+    sim = Cosim(classes, [VehicleSpec("c", "car", W, speed_limits=lim)], CosimSettings(controller="authority", seed=3))
+    sim._admit(0.0)
+    g, Ts = sim.groups["car"], sim.settings.Ts
+    kc, ask, off = 42, 57, 1.0
+    g.X[0] = [arc[kc] + off, 0.0, 13.89, 0.0]
+    g.k[0], g.l[0] = ask - 1, g.ctl.N
+    lp = int(g.ctl.index(g.X, *g.centres(1)[:2])[0])
+    cap, lane = g.speed_caps(Ts)
+    assert lp <= g.ctl.N and cap[0] >= g.v_max - 1e-9 and lane[0] > 13.0  # at its horizon, bound unseen
+    s, v = g._along()
+    first = g.start[:1]
+    stop = np.array([s[0] + arc[ask] - arc[kc] - off])
+    steps_with, steps_without, t_with, t_without = plan_steps(
+        s[:1], v[:1], stop, *g._tables(), first, first + g.K[:1] - 1, 0.5 * car.length, g.decel, g.u_max,
+        g.v_max, Ts, seconds=True)
+    assert steps_with[0] == steps_without[0] and 0.01 < t_with[0] - t_without[0] < Ts  # costs < a step
+    assert int(g.slack(Ts, 1, cap)[0]) == sim.settings.speed.slack_steps  # was 0
+    may, l_req, _ = g.request(Ts, "early", True)
+    assert int(l_req[0]) == min(lp + sim.settings.speed.slack_steps, g.ctl.N) and not bool(may[0])
