@@ -457,6 +457,16 @@ class AuthorityGate(JunctionGate):
         guard from there (it arrives inside) or the stop point is past the slot."""
         return self._wide_paths(fleet, [(row, z, first)])[0]
 
+    def _path_idx(self, fleet: JunctionFleet, row: int, z: int, first: int) -> np.ndarray | None:
+        """The waypoints of row ``row``'s path through zone ``z`` from waypoint ``first`` to the exit
+        slot (:meth:`_wide_path`, :meth:`_wide_polygons`); None when the route does not leave the guard
+        from there or the stop point is past the slot."""
+        k = fleet.route(row)[2]
+        span = self._span_of(fleet, row, z, k + 1) or self._span_of(fleet, row, z, k)
+        if span is None or not span[2] or first > span[1]:
+            return None
+        return np.arange(max(first, 0), span[1] + 1)
+
     def _wide_paths(self, fleet: JunctionFleet, asks: list) -> list:
         """:meth:`_wide_path` of each ``(row, z, first)`` of ``asks``, kept per (vehicle, zone, stop
         point, first); those not kept yet computed together (their boxes one class at a time)."""
@@ -468,11 +478,11 @@ class AuthorityGate(JunctionGate):
             key = (fleet.ids[row], z, k, first)
             found = self._wide.get(key, _UNSET)
             if found is _UNSET:
-                span = self._span_of(fleet, row, z, k + 1) or self._span_of(fleet, row, z, k)
-                if span is None or not span[2] or first > span[1]:
+                idx = self._path_idx(fleet, row, z, first)
+                if idx is None:
                     found = self._wide[key] = None
                 else:
-                    todo.append((len(out), key, row, W, H, np.arange(max(first, 0), span[1] + 1)))
+                    todo.append((len(out), key, row, W, H, idx))
             out.append(found)
         for c in sorted({fleet.family[t[2]] for t in todo}):
             mine = [t for t in todo if fleet.family[t[2]] == c]
@@ -498,12 +508,18 @@ class AuthorityGate(JunctionGate):
             got = memo[1][row] = self._standing_box(fleet, row)
         return got
 
-    def _standing_box(self, fleet: JunctionFleet, row: int) -> tuple[np.ndarray, np.ndarray]:
+    def _at_stop(self, fleet: JunctionFleet, row: int) -> tuple:
+        """Row ``row``'s class, stop point ``W[k]`` (1, 2), padding there (1, 4) and the stop point's
+        arriving and leaving headings (1,) each: what its hold box at rest is drawn from."""
         W, H, k = fleet.route(row)
         idx = np.array([k])
-        lo, hi = self.classes[fleet.family[row]].hold_box(fleet.pad(row, idx), H[idx],
-                                                         H[np.minimum(idx + 1, len(H) - 1)])
-        return W[k] + lo[0], W[k] + hi[0]
+        return (self.classes[fleet.family[row]], W[idx], fleet.pad(row, idx), H[idx],
+                H[np.minimum(idx + 1, len(H) - 1)])
+
+    def _standing_box(self, fleet: JunctionFleet, row: int) -> tuple[np.ndarray, np.ndarray]:
+        cls, w, pad, h_in, h_out = self._at_stop(fleet, row)
+        lo, hi = cls.hold_box(pad, h_in, h_out)
+        return w[0] + lo[0], w[0] + hi[0]
 
     def _beyond_meets(self, fleet: JunctionFleet, row: int, z: int, box) -> bool:
         """Whether row ``row``'s wide path through zone ``z`` beyond its stop point meets ``box``."""
@@ -663,10 +679,9 @@ class AuthorityGate(JunctionGate):
         if found is _UNSET:
             if len(self._wide_poly) > 100_000:  # stale keys: start over
                 self._wide_poly.clear()
-            span = self._span_of(fleet, row, z, k + 1) or self._span_of(fleet, row, z, k)
+            idx = self._path_idx(fleet, row, z, k + 1)
             found = None
-            if span is not None and span[2] and k + 1 <= span[1]:
-                idx = np.arange(k + 1, span[1] + 1)
+            if idx is not None:
                 found = self.classes[fleet.family[row]].corridor_polygons(W[idx], fleet.pad(row, idx), H[idx],
                                                                           H[np.minimum(idx + 1, len(H) - 1)])
             self._wide_poly[key] = found
@@ -675,10 +690,8 @@ class AuthorityGate(JunctionGate):
     def _standing_polygons(self, fleet: JunctionFleet, row: int) -> np.ndarray:
         """Row ``row`` at rest at its stop point: its padded hold box as oriented boxes (2, 4, 2), at
         the stop point's arriving and leaving headings."""
-        W, H, k = fleet.route(row)
-        idx = np.array([k])
-        return self.classes[fleet.family[row]].hold_polygons(W[idx], fleet.pad(row, idx), H[idx],
-                                                            H[np.minimum(idx + 1, len(H) - 1)])
+        cls, w, pad, h_in, h_out = self._at_stop(fleet, row)
+        return cls.hold_polygons(w, pad, h_in, h_out)
 
     def _passable(self, fleet: JunctionFleet, pos: dict, t: int, holder: str, row: int, z: int) -> bool:
         """A candidate may take the token beside a holder whose corridor its own meets when that

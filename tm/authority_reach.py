@@ -132,10 +132,6 @@ class AuthorityReach:
         return _polygons(0.5 * self.delta + self.hold + 0.5 * self.length, self.hold_y + 0.5 * self.width,
                          W, pad, *headings)
 
-    def claim_polygons(self, W: np.ndarray, pad: np.ndarray, *headings: np.ndarray) -> np.ndarray:
-        """:meth:`claim_box` around waypoints ``W`` as oriented boxes (as :meth:`corridor_polygons`)."""
-        return _polygons(self.hold + 0.5 * self.length, self.across + 0.5 * self.width, W, pad, *headings)
-
     def hold_polygons(self, W: np.ndarray, pad: np.ndarray, *headings: np.ndarray) -> np.ndarray:
         """:meth:`hold_box` around waypoints ``W`` as oriented boxes (as :meth:`corridor_polygons`)."""
         return _polygons(self.hold + 0.5 * self.length, self.hold_y + 0.5 * self.width, W, pad, *headings)

@@ -47,7 +47,7 @@ from controllers.authority import AuthorityTables
 from controllers.stmpc import FactorMembership
 from controllers.synthesis import SetFamily, rotate_pairs
 from controllers.tolerances import GEOMETRY_TOL, REACH_LOOKUP_MARGIN
-from tm.geometry import broad_phase
+from tm.geometry import broad_phase, rectangles
 from tm.kernels import reach_boxes, timed_pairs_plain, timed_pairs_tight, union_bounds
 from tm.slot_boxes import SlotBoxes
 
@@ -498,17 +498,14 @@ def world_aabb(claims: ReachClaims) -> tuple[np.ndarray, np.ndarray]:
 
 
 def claim_polygons(claims: ReachClaims, row: int) -> np.ndarray:
-    """Oriented boxes (m, 4, 2), counter-clockwise, whose union is vehicle ``row``'s ``∪_k S_k``: the
-    boxes of its slots (:meth:`ReachClaims.slot_union`), each once."""
+    """Oriented boxes (m, 4, 2), counter-clockwise from the front right corner
+    (:func:`tm.geometry.rectangles`), whose union is vehicle ``row``'s ``∪_k S_k``: the boxes of its
+    slots (:meth:`ReachClaims.slot_union`), each once."""
     u = claims.slot_union()
     st, ct = u.start[row], u.count[row]
     idx = np.unique(np.concatenate([np.arange(a, a + c) for a, c in zip(st.tolist(), ct.tolist())] or
                                    [np.zeros(0, dtype=np.intp)])).astype(np.intp)
-    c, s = np.cos(u.heading[idx])[:, None], np.sin(u.heading[idx])[:, None]
-    hx, hy = u.half[idx, 0:1], u.half[idx, 1:2]
-    xs = np.hstack([-hx, hx, hx, -hx])
-    ys = np.hstack([-hy, -hy, hy, hy])
-    return u.centre[idx][:, None, :] + np.stack([c * xs - s * ys, s * xs + c * ys], axis=-1)
+    return u.centre[idx][:, None, :] + rectangles(u.heading[idx], 2.0 * u.half[idx, 0], 2.0 * u.half[idx, 1])
 
 
 def candidate_pairs(lo_a, hi_a, lo_b, hi_b, tol: float = GEOMETRY_TOL) -> tuple[np.ndarray, np.ndarray]:

@@ -337,7 +337,7 @@ def test_drawn_polygon_holds_every_slot_box(seed, n):
 def test_claim_polygons_are_the_slot_boxes_each_once(seed, n):
     """tm.reach.claim_polygons (the junction gate's oriented view of a vehicle's claims): for random
     boxes, headings, empty and repeated slots, the polygons of vehicle ``i`` are its non-empty slot
-    boxes' world corners (``world_corners``, counter-clockwise), each box once (a repeated slot
+    boxes' world corners (``world_corners``, counter-clockwise, from the front right corner), each box once (a repeated slot
     shares its box in the claims' :class:`~tm.slot_boxes.SlotBoxes`: counted once), within 1e-9 m
     (the same rotation, a sum's rounding apart); with tight boxes (:class:`SlotBoxes`) too."""
     from tm.reach import ReachClaims, claim_polygons
@@ -358,7 +358,9 @@ def test_claim_polygons_are_the_slot_boxes_each_once(seed, n):
         P = claim_polygons(claims, i)
         assert P.shape == (len(full), 4, 2)
         for q, k in enumerate(full):
-            np.testing.assert_allclose(P[q], claims.world_corners(i, k + 1), rtol=0, atol=1e-9)
+            # world_corners starts at the rear right corner, the polygons at the front right one
+            want = np.roll(claims.world_corners(i, k + 1), -1, axis=0)
+            np.testing.assert_allclose(P[q], want, rtol=0, atol=1e-9)
         T = claim_polygons(tight, i)
         want = sorted({int(rep[i, k]) for k in range(K) if u.count[i, k]})
         assert len(T) == len(want)
