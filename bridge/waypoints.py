@@ -194,6 +194,15 @@ def _at(points: np.ndarray, arc: np.ndarray, s: float) -> np.ndarray:
     return points[i] + t * (points[i + 1] - points[i])
 
 
+def stretch_length(n_lanes: int, length: float) -> float:
+    """The length ``lc`` of each of :func:`lane_change_plan`'s ``2 (n - 1)`` stretches on an edge of
+    ``n_lanes`` lanes and arc length ``length`` (0 for one lane)."""
+    k = 2 * (n_lanes - 1)
+    if not k:
+        return 0.0
+    return min(LANE_CHANGE_M, (length - LANE_CHANGE_END_M - LANE_CHANGE_START_M - (k - 1) * LANE_CHANGE_GAP_M) / k)
+
+
 def lane_change_plan(n_lanes: int, arrive: int, leave: int, length: float,
                      stepwise: bool = True) -> list[tuple[float, float]]:
     """Where along an edge a route changes from lane ``arrive`` to lane ``leave``: the arc-length
@@ -231,7 +240,7 @@ def lane_change_plan(n_lanes: int, arrive: int, leave: int, length: float,
         return []
     k = 2 * (n_lanes - 1)
     gap = LANE_CHANGE_GAP_M
-    lc = min(LANE_CHANGE_M, (length - LANE_CHANGE_END_M - LANE_CHANGE_START_M - (k - 1) * gap) / k) if k else 0.0
+    lc = stretch_length(n_lanes, length)
     if not stepwise or lc < LANE_CHANGE_MIN_M:
         one = min(LANE_CHANGE_M * abs(leave - arrive), 0.5 * length)
         s_a = 0.5 * (length - one)
@@ -719,10 +728,8 @@ class NetGeometry:
         n = self.lane_count(edge_id)
         if n < 2:
             return False
-        k = 2 * (n - 1)
         length = min(_arc(self.lane_shape(f"{edge_id}_{j}"))[-1] for j in range(n))  # as route() takes it
-        lc = min(LANE_CHANGE_M, (length - LANE_CHANGE_END_M - LANE_CHANGE_START_M - (k - 1) * LANE_CHANGE_GAP_M) / k)
-        return lc < LANE_CHANGE_MIN_M
+        return stretch_length(n, length) < LANE_CHANGE_MIN_M
 
     def start_lanes(self, edges: Sequence[str], vclass: str | None = None) -> dict[int, int]:
         """The lanes of a route's first edge that ``vclass`` may use, each with the lane changes the
