@@ -35,7 +35,7 @@ from tm.crossing_gate import CrossingGate
 from tm.junctions import JunctionFleet
 from tm.manager import FleetState
 from tm.pedestrians import STRIPING_SPEED_FACTOR, PedestrianRule
-from tm.reach import ReachClaims, claim_polygons, world_aabb
+from tm.reach import ReachClaims, claim_polygons_of, world_aabb
 from tm.signals import LineTiming, SignalBook, SignalSettings, withhold as signal_withhold
 
 __all__ = ["RequestFilters"]
@@ -206,7 +206,7 @@ class RequestFilters:
                 return np.zeros((len(idx), 4)) if p is None else p
             pads = route_pads
         # authority mode: the oriented boxes of a vehicle's current claims, when a rule asks (tm.authority_gate)
-        polys = partial(claim_polygons, self._claims_now) if self.authority else None
+        polys = partial(claim_polygons_of, self._claims_now) if self.authority else None
         fleet = JunctionFleet(state.ids, state.family, cur_lo, cur_hi,
                               tuple((g.W, g.H, g.k) for g in live_groups(self.groups)), pads, polys)
         req = self.junctions.withhold(self.t, fleet, state.requesting, new_lo, new_hi)

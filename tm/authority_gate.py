@@ -94,7 +94,7 @@ from operator import itemgetter
 import numpy as np
 
 from tm.authority_reach import AuthorityReach
-from tm.boxes import boxes_meet, polygons_meet
+from tm.boxes import boxes_meet, polygon_sets_meet, polygons_meet, ranges
 from tm.junctions import JunctionFleet, JunctionGate
 from tm.keep_out import KeepOut
 from tm.stalls import StallClock
@@ -634,13 +634,23 @@ class AuthorityGate(JunctionGate):
         turning right onto the diagonal ``-148050455#0`` never found its exit slot free while a queue
         stood on ``148050455#0`` beside it, and with it waited every vehicle behind."""
         out = np.ones(len(rows), dtype=bool)
-        if fleet.claim_polygons is None:
+        if fleet.claim_polygons is None or not len(rows):
             return out
-        for i, (key, j) in enumerate(zip(keys, rows.tolist())):
-            mine = self._slot_polys.get(key)
-            if mine is not None and not polygons_meet(mine, fleet.claim_polygons(j)):
-                out[i] = False
-                self.slots_freed += 1
+        mine = [self._slot_polys.get(key) for key in keys]
+        known = np.array([m is not None for m in mine])
+        if not known.any():
+            return out
+        pairs = np.flatnonzero(known)                    # all pairs at once (one SAT call)
+        P = np.concatenate([mine[t] for t in pairs.tolist()])
+        p_of = np.repeat(np.arange(len(pairs)), [len(mine[t]) for t in pairs.tolist()])
+        uniq, inv = np.unique(rows[pairs], return_inverse=True)
+        Q, q_owner = fleet.claim_polygons(uniq)          # each other vehicle's boxes once
+        cnt = np.bincount(q_owner, minlength=len(uniq))
+        q_idx = ranges((np.cumsum(cnt) - cnt)[inv], cnt[inv])
+        q_of = np.repeat(np.arange(len(pairs)), cnt[inv])
+        free = ~polygon_sets_meet(P, p_of, Q[q_idx], q_of, len(pairs))
+        out[pairs[free]] = False
+        self.slots_freed += int(free.sum())
         return out
 
     def _standing_hits(self, fleet: JunctionFleet, zq: np.ndarray, rq: np.ndarray, first: np.ndarray,

@@ -14,7 +14,14 @@ import numpy as np
 from controllers.tolerances import SWEEP_MARGIN
 from tm.geometry import intersect_sat
 
-__all__ = ["BoxGrid", "GuardIndex", "corridor_hits", "boxes_meet", "polygons_meet"]
+__all__ = ["BoxGrid", "GuardIndex", "corridor_hits", "boxes_meet", "polygons_meet", "polygon_sets_meet",
+           "ranges"]
+
+
+def ranges(start: np.ndarray, count: np.ndarray) -> np.ndarray:
+    """The indices ``start[i], ..., start[i] + count[i] - 1`` of every ``i``, in order, as one array."""
+    start, count = np.asarray(start, dtype=np.intp), np.asarray(count, dtype=np.intp)
+    return np.repeat(start - np.cumsum(count) + count, count) + np.arange(int(count.sum()), dtype=np.intp)
 
 
 def _cells(lo: np.ndarray, hi: np.ndarray, cell: float):
@@ -52,7 +59,7 @@ class BoxGrid:
         count = np.searchsorted(self.key, qk, side="right") - start
         i = np.repeat(qb, count)
         k = np.repeat(qk, count)
-        j = self.box[np.repeat(start - np.cumsum(count) + count, count) + np.arange(int(count.sum()))]
+        j = self.box[ranges(start, count)]
         lo, hi = self.lo, self.hi
         ok = (hi[j, 0] >= q_lo[i, 0]) & (lo[j, 0] <= q_hi[i, 0]) & (lo[j, 1] <= q_hi[i, 1]) & (hi[j, 1] >= q_lo[i, 1])
         i, j, k = i[ok], j[ok], k[ok]
@@ -81,7 +88,7 @@ class GuardIndex:
         start = np.searchsorted(zx, lo[:, 0] - self.width_x - SWEEP_MARGIN, side="left")
         count = np.maximum(np.searchsorted(zx, hi[:, 0], side="right") - start, 0)
         i = np.repeat(np.arange(len(lo)), count)
-        q = np.repeat(start - np.cumsum(count) + count, count) + np.arange(int(count.sum()))
+        q = ranges(start, count)
         z = self.order[q]
         zl, zh = self.lo, self.hi
         ok = (lo[i, 0] <= zh[z, 0]) & (hi[i, 0] >= zl[z, 0]) & (lo[i, 1] <= zh[z, 1]) & (hi[i, 1] >= zl[z, 1])
@@ -100,7 +107,7 @@ def corridor_hits(zone_q, row_q, first, c_lo, c_hi, zone_b, row_b, b_lo, b_hi) -
     s = np.searchsorted(zone_b, zone_q, side="left")
     cnt = np.searchsorted(zone_b, zone_q, side="right") - s
     q = np.repeat(np.arange(len(zone_q)), cnt)
-    k = np.repeat(s - np.cumsum(cnt) + cnt, cnt) + np.arange(int(cnt.sum()))
+    k = ranges(s, cnt)
     j = row_b[k]
     # the corridor's bounding box first: most pairs of a zone are far apart
     cb_lo = np.minimum.reduceat(c_lo, first[:-1], axis=0)
@@ -112,7 +119,7 @@ def corridor_hits(zone_q, row_q, first, c_lo, c_hi, zone_b, row_b, b_lo, b_hi) -
     n_box = first[q + 1] - first[q]
     qq = np.repeat(q, n_box)
     jj = np.repeat(j, n_box)
-    bb = np.repeat(first[q] - np.cumsum(n_box) + n_box, n_box) + np.arange(int(n_box.sum()))
+    bb = ranges(first[q], n_box)
     meet = np.all((c_lo[bb] <= b_hi[jj]) & (c_hi[bb] >= b_lo[jj]), axis=1)
     hits[qq[meet]] = True
     return hits
@@ -129,3 +136,25 @@ def polygons_meet(P: np.ndarray, Q: np.ndarray) -> bool:
     lo, hi, q_lo, q_hi = P.min(axis=1), P.max(axis=1), Q.min(axis=1), Q.max(axis=1)
     i, j = np.nonzero(np.all((lo[:, None, :] <= q_hi[None]) & (hi[:, None, :] >= q_lo[None]), axis=2))
     return bool(len(i)) and bool(intersect_sat(P[i], Q[j]).any())
+
+
+def polygon_sets_meet(P: np.ndarray, p_of: np.ndarray, Q: np.ndarray, q_of: np.ndarray, n: int) -> np.ndarray:
+    """:func:`polygons_meet` of ``n`` pairs of polygon sets at once: entry ``t`` is whether some
+    polygon ``P[i]`` with ``p_of[i] == t`` meets some ``Q[j]`` with ``q_of[j] == t`` (``P`` (p, m, 2),
+    ``Q`` (q, m', 2), counter-clockwise and convex; ``p_of``, ``q_of`` non-decreasing in ``[0, n)``)."""
+    out = np.zeros(n, dtype=bool)
+    cp = np.bincount(np.asarray(p_of, dtype=np.intp), minlength=n)
+    cq = np.bincount(np.asarray(q_of, dtype=np.intp), minlength=n)
+    combos = cp * cq
+    if not combos.any():
+        return out
+    t = np.repeat(np.arange(n), combos)
+    r = ranges(np.zeros(n, dtype=np.intp), combos)       # index of the combination within its pair
+    i = (np.cumsum(cp) - cp)[t] + r // cq[t]
+    j = (np.cumsum(cq) - cq)[t] + r % cq[t]
+    lo, hi, q_lo, q_hi = P.min(axis=1), P.max(axis=1), Q.min(axis=1), Q.max(axis=1)
+    near = np.all((lo[i] <= q_hi[j]) & (hi[i] >= q_lo[j]), axis=1)
+    t, i, j = t[near], i[near], j[near]
+    if len(t):
+        out[t[intersect_sat(P[i], Q[j])]] = True
+    return out

@@ -130,8 +130,9 @@ class JunctionFleet:
         ``idx[i]`` (``rows``, ``idx`` int arrays (m,); SUMO's bodies, :mod:`bridge.sumo_body`);
         None: no padding.
     claim_polygons : callable or None
-        ``claim_polygons(row)``: oriented boxes (m, 4, 2), counter-clockwise, whose union holds every
-        current claim of fleet row ``row`` (:func:`tm.reach.claim_polygons`); None: only the world
+        ``claim_polygons(rows)``: oriented boxes (M, 4, 2), counter-clockwise, and the position in
+        ``rows`` (int array) of the row each is of (M,), non-decreasing: the union of a row's boxes holds
+        every current claim of that row (:func:`tm.reach.claim_polygons_of`); None: only the world
         boxes ``claim_lo, claim_hi`` are known.
     """
 

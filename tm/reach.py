@@ -47,6 +47,7 @@ from controllers.authority import AuthorityTables
 from controllers.stmpc import FactorMembership
 from controllers.synthesis import SetFamily, rotate_pairs
 from controllers.tolerances import GEOMETRY_TOL, REACH_LOOKUP_MARGIN
+from tm.boxes import ranges
 from tm.geometry import broad_phase, rectangles
 from tm.kernels import reach_boxes, timed_pairs_plain, timed_pairs_tight, union_bounds
 from tm.slot_boxes import SlotBoxes
@@ -500,12 +501,23 @@ def world_aabb(claims: ReachClaims) -> tuple[np.ndarray, np.ndarray]:
 def claim_polygons(claims: ReachClaims, row: int) -> np.ndarray:
     """Oriented boxes (m, 4, 2), counter-clockwise from the front right corner
     (:func:`tm.geometry.rectangles`), whose union is vehicle ``row``'s ``∪_k S_k``: the boxes of its
-    slots (:meth:`ReachClaims.slot_union`), each once."""
+    slots (:meth:`ReachClaims.slot_union`), each once (:func:`claim_polygons_of` of one row)."""
+    return claim_polygons_of(claims, np.array([row], dtype=np.intp))[0]
+
+
+def claim_polygons_of(claims: ReachClaims, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`claim_polygons` of several rows at once: the boxes (M, 4, 2) and the position in
+    ``rows`` of the row each is of (M,), non-decreasing."""
+    rows = np.asarray(rows, dtype=np.intp).reshape(-1)
     u = claims.slot_union()
-    st, ct = u.start[row], u.count[row]
-    idx = np.unique(np.concatenate([np.arange(a, a + c) for a, c in zip(st.tolist(), ct.tolist())] or
-                                   [np.zeros(0, dtype=np.intp)])).astype(np.intp)
-    return u.centre[idx][:, None, :] + rectangles(u.heading[idx], 2.0 * u.half[idx, 0], 2.0 * u.half[idx, 1])
+    st, ct = u.start[rows], u.count[rows]                   # (m, K)
+    owner = np.repeat(np.arange(len(rows)), ct.sum(axis=1))
+    box = ranges(st.ravel(), ct.ravel())
+    # each box once per row (a slot's box may stand for several steps)
+    key = np.unique(owner.astype(np.int64) * max(len(u.centre), 1) + box)
+    owner, box = (key // max(len(u.centre), 1)).astype(np.intp), (key % max(len(u.centre), 1)).astype(np.intp)
+    polys = u.centre[box][:, None, :] + rectangles(u.heading[box], 2.0 * u.half[box, 0], 2.0 * u.half[box, 1])
+    return polys, owner
 
 
 def candidate_pairs(lo_a, hi_a, lo_b, hi_b, tol: float = GEOMETRY_TOL) -> tuple[np.ndarray, np.ndarray]:

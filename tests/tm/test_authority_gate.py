@@ -1004,8 +1004,11 @@ def test_an_exit_slot_on_a_diagonal_road_is_free_beside_the_opposite_lane():
             lo_s, hi_s = W[slot] - half, W[slot] + half
             assert boxes_meet(lo_q[None], hi_q[None], lo_s[None], hi_s[None])  # the world boxes meet
             if oriented:
-                fleet = replace(fleet, claim_polygons=lambda row, s=scene: CAR.hold_polygons(
-                    s.routes[row][0][s.k[row]][None], np.zeros((1, 4)), s.routes[row][1][s.k[row]:s.k[row] + 1]))
+                def polys(rows, s=scene):
+                    P = [CAR.hold_polygons(s.routes[r][0][s.k[r]][None], np.zeros((1, 4)),
+                                           s.routes[r][1][s.k[r]:s.k[r] + 1]) for r in rows.tolist()]
+                    return np.concatenate(P), np.repeat(np.arange(len(P)), [len(q) for q in P])
+                fleet = replace(fleet, claim_polygons=polys)
             req = gate.withhold(0, fleet, scene.requesting, np.zeros((1, 2)), np.zeros((1, 2)))
             got = "C" in _holders(gate)
             assert got == (oriented and not taken), (shift, oriented, req)

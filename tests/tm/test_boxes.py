@@ -80,3 +80,28 @@ def test_corridor_hits_are_the_dense_test_within_a_zone(seed, n_q, n_b, n_zones)
         assert hits[q] == want
     assert boxes_meet(np.zeros((1, 2)), np.ones((1, 2)), np.ones((1, 2)), np.full((1, 2), 2.0))  # touching
     assert not boxes_meet(np.zeros((1, 2)), np.ones((1, 2)), np.full((1, 2), 1.5), np.full((1, 2), 2.0))
+
+
+def _rects(rng, m):
+    """``m`` random oriented rectangles (m, 4, 2), counter-clockwise, some touching by construction."""
+    from tm.geometry import rectangles
+    c = rng.uniform(-15, 15, (m, 2))
+    return c[:, None, :] + rectangles(rng.uniform(-np.pi, np.pi, m), rng.uniform(0.5, 8, m), rng.uniform(0.5, 4, m))
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2 ** 31), n=st.integers(0, 8))
+def test_polygon_sets_meet_is_polygons_meet_of_each_pair(seed, n):
+    """The junction gate's batched exit-slot test (tm.boxes.polygon_sets_meet) is, pair by pair,
+    polygons_meet of that pair's two sets (the same SAT, so exactly), for random rectangles, sets of
+    0-4 polygons (empty sets meet nothing) and pairs that share polygons."""
+    from tm.boxes import polygon_sets_meet, polygons_meet
+    rng = np.random.default_rng(seed)
+    cp, cq = rng.integers(0, 5, n), rng.integers(0, 5, n)
+    P, Q = _rects(rng, int(cp.sum())), _rects(rng, int(cq.sum()))
+    if n and cq.sum():
+        Q[0] = P[0] if cp.sum() else Q[0]               # one exact overlap across sets
+    p_of, q_of = np.repeat(np.arange(n), cp), np.repeat(np.arange(n), cq)
+    got = polygon_sets_meet(P, p_of, Q, q_of, n)
+    want = [polygons_meet(P[p_of == t], Q[q_of == t]) for t in range(n)]
+    assert got.tolist() == want
