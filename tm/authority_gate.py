@@ -94,7 +94,7 @@ from operator import itemgetter
 import numpy as np
 
 from tm.authority_reach import AuthorityReach
-from tm.boxes import boxes_meet, polygon_sets_meet, polygons_meet, ranges
+from tm.boxes import boxes_meet, polygon_sets_meet, polygons_meet
 from tm.junctions import JunctionFleet, JunctionGate
 from tm.keep_out import KeepOut
 from tm.stalls import StallClock
@@ -640,15 +640,13 @@ class AuthorityGate(JunctionGate):
         known = np.array([m is not None for m in mine])
         if not known.any():
             return out
-        pairs = np.flatnonzero(known)                    # all pairs at once (one SAT call)
+        pairs = np.flatnonzero(known)                    # all pairs at once
         P = np.concatenate([mine[t] for t in pairs.tolist()])
-        p_of = np.repeat(np.arange(len(pairs)), [len(mine[t]) for t in pairs.tolist()])
+        p_count = np.array([len(mine[t]) for t in pairs.tolist()], dtype=np.intp)
         uniq, inv = np.unique(rows[pairs], return_inverse=True)
         Q, q_owner = fleet.claim_polygons(uniq)          # each other vehicle's boxes once
         cnt = np.bincount(q_owner, minlength=len(uniq))
-        q_idx = ranges((np.cumsum(cnt) - cnt)[inv], cnt[inv])
-        q_of = np.repeat(np.arange(len(pairs)), cnt[inv])
-        free = ~polygon_sets_meet(P, p_of, Q[q_idx], q_of, len(pairs))
+        free = ~polygon_sets_meet(P, np.cumsum(p_count) - p_count, p_count, Q, (np.cumsum(cnt) - cnt)[inv], cnt[inv])
         out[pairs[free]] = False
         self.slots_freed += int(free.sum())
         return out

@@ -138,23 +138,35 @@ def polygons_meet(P: np.ndarray, Q: np.ndarray) -> bool:
     return bool(len(i)) and bool(intersect_sat(P[i], Q[j]).any())
 
 
-def polygon_sets_meet(P: np.ndarray, p_of: np.ndarray, Q: np.ndarray, q_of: np.ndarray, n: int) -> np.ndarray:
-    """:func:`polygons_meet` of ``n`` pairs of polygon sets at once: entry ``t`` is whether some
-    polygon ``P[i]`` with ``p_of[i] == t`` meets some ``Q[j]`` with ``q_of[j] == t`` (``P`` (p, m, 2),
-    ``Q`` (q, m', 2), counter-clockwise and convex; ``p_of``, ``q_of`` non-decreasing in ``[0, n)``)."""
+def polygon_sets_meet(P: np.ndarray, p_start: np.ndarray, p_count: np.ndarray, Q: np.ndarray,
+                      q_start: np.ndarray, q_count: np.ndarray) -> np.ndarray:
+    """:func:`polygons_meet` of ``n`` pairs of polygon sets at once: entry ``t`` is whether some polygon
+    of ``P[p_start[t]:p_start[t] + p_count[t]]`` meets some of ``Q[q_start[t]:q_start[t] + q_count[t]]``
+    (``P`` (p, m, 2), ``Q`` (q, m', 2), counter-clockwise and convex; sets may share polygons).
+
+    Bounding boxes first; then the separating-axis test on one meeting candidate of each pair, and on
+    the rest only for the pairs that one left open (where boxes mostly meet as their bounding boxes
+    do, as on a road grid along the axes, one test a pair decides it)."""
+    p_start, p_count = np.asarray(p_start, dtype=np.intp), np.asarray(p_count, dtype=np.intp)
+    q_start, q_count = np.asarray(q_start, dtype=np.intp), np.asarray(q_count, dtype=np.intp)
+    n = len(p_start)
     out = np.zeros(n, dtype=bool)
-    cp = np.bincount(np.asarray(p_of, dtype=np.intp), minlength=n)
-    cq = np.bincount(np.asarray(q_of, dtype=np.intp), minlength=n)
-    combos = cp * cq
+    combos = p_count * q_count
     if not combos.any():
         return out
     t = np.repeat(np.arange(n), combos)
     r = ranges(np.zeros(n, dtype=np.intp), combos)       # index of the combination within its pair
-    i = (np.cumsum(cp) - cp)[t] + r // cq[t]
-    j = (np.cumsum(cq) - cq)[t] + r % cq[t]
+    qc = q_count[t]
+    i, j = p_start[t] + r // qc, q_start[t] + r % qc
     lo, hi, q_lo, q_hi = P.min(axis=1), P.max(axis=1), Q.min(axis=1), Q.max(axis=1)
     near = np.all((lo[i] <= q_hi[j]) & (hi[i] >= q_lo[j]), axis=1)
     t, i, j = t[near], i[near], j[near]
-    if len(t):
-        out[t[intersect_sat(P[i], Q[j])]] = True
+    if not len(t):
+        return out
+    first = np.flatnonzero(np.r_[True, t[1:] != t[:-1]])  # each pair's first candidate (t is sorted)
+    out[t[first[intersect_sat(P[i[first]], Q[j[first]])]]] = True
+    rest = ~out[t]
+    rest[first] = False
+    if rest.any():
+        out[t[rest][intersect_sat(P[i[rest]], Q[j[rest]])]] = True
     return out

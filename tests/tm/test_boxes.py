@@ -102,6 +102,10 @@ def test_polygon_sets_meet_is_polygons_meet_of_each_pair(seed, n):
     if n and cq.sum():
         Q[0] = P[0] if cp.sum() else Q[0]               # one exact overlap across sets
     p_of, q_of = np.repeat(np.arange(n), cp), np.repeat(np.arange(n), cq)
-    got = polygon_sets_meet(P, p_of, Q, q_of, n)
     want = [polygons_meet(P[p_of == t], Q[q_of == t]) for t in range(n)]
+    got = polygon_sets_meet(P, np.cumsum(cp) - cp, cp, Q, np.cumsum(cq) - cq, cq)
     assert got.tolist() == want
+    # sets that share polygons: every pair takes Q's sets in reverse order (read, not copied)
+    rev = np.arange(n)[::-1]
+    got = polygon_sets_meet(P, np.cumsum(cp) - cp, cp, Q, (np.cumsum(cq) - cq)[rev], cq[rev])
+    assert got.tolist() == [polygons_meet(P[p_of == t], Q[q_of == rev[t]]) for t in range(n)]
