@@ -133,9 +133,7 @@ def boxes_meet(lo1: np.ndarray, hi1: np.ndarray, lo2: np.ndarray, hi2: np.ndarra
 def polygons_meet(P: np.ndarray, Q: np.ndarray) -> bool:
     """Whether some convex polygon of ``P`` (p, m, 2) meets some of ``Q`` (q, m', 2), counter-clockwise
     (separating axes, :func:`tm.geometry.intersect_sat`; touching counts), their bounding boxes first."""
-    lo, hi, q_lo, q_hi = P.min(axis=1), P.max(axis=1), Q.min(axis=1), Q.max(axis=1)
-    i, j = np.nonzero(np.all((lo[:, None, :] <= q_hi[None]) & (hi[:, None, :] >= q_lo[None]), axis=2))
-    return bool(len(i)) and bool(intersect_sat(P[i], Q[j]).any())
+    return bool(polygon_sets_meet(P, [0], [len(P)], Q, [0], [len(Q)])[0])
 
 
 def polygon_sets_meet(P: np.ndarray, p_start: np.ndarray, p_count: np.ndarray, Q: np.ndarray,

@@ -93,19 +93,28 @@ def _rects(rng, m):
 @given(seed=st.integers(0, 2 ** 31), n=st.integers(0, 8))
 def test_polygon_sets_meet_is_polygons_meet_of_each_pair(seed, n):
     """The junction gate's batched exit-slot test (tm.boxes.polygon_sets_meet) is, pair by pair,
-    polygons_meet of that pair's two sets (the same SAT, so exactly), for random rectangles, sets of
-    0-4 polygons (empty sets meet nothing) and pairs that share polygons."""
+    whether any two polygons of the pair's sets meet by the separating-axis test (tm.geometry.intersect_sat
+    on every combination, no bounding boxes: the same SAT, so exactly), for random rectangles, sets of
+    0-4 polygons (empty sets meet nothing) and pairs that share polygons; polygons_meet is one pair."""
     from tm.boxes import polygon_sets_meet, polygons_meet
+    from tm.geometry import intersect_sat
+
+    def dense(A, B):
+        if not len(A) or not len(B):
+            return False
+        i, j = np.meshgrid(np.arange(len(A)), np.arange(len(B)), indexing="ij")
+        return bool(intersect_sat(A[i.ravel()], B[j.ravel()]).any())
     rng = np.random.default_rng(seed)
     cp, cq = rng.integers(0, 5, n), rng.integers(0, 5, n)
     P, Q = _rects(rng, int(cp.sum())), _rects(rng, int(cq.sum()))
     if n and cq.sum():
         Q[0] = P[0] if cp.sum() else Q[0]               # one exact overlap across sets
     p_of, q_of = np.repeat(np.arange(n), cp), np.repeat(np.arange(n), cq)
-    want = [polygons_meet(P[p_of == t], Q[q_of == t]) for t in range(n)]
+    want = [dense(P[p_of == t], Q[q_of == t]) for t in range(n)]
     got = polygon_sets_meet(P, np.cumsum(cp) - cp, cp, Q, np.cumsum(cq) - cq, cq)
     assert got.tolist() == want
+    assert [polygons_meet(P[p_of == t], Q[q_of == t]) for t in range(n)] == want
     # sets that share polygons: every pair takes Q's sets in reverse order (read, not copied)
     rev = np.arange(n)[::-1]
     got = polygon_sets_meet(P, np.cumsum(cp) - cp, cp, Q, (np.cumsum(cq) - cq)[rev], cq[rev])
-    assert got.tolist() == [polygons_meet(P[p_of == t], Q[q_of == rev[t]]) for t in range(n)]
+    assert got.tolist() == [dense(P[p_of == t], Q[q_of == rev[t]]) for t in range(n)]
