@@ -486,7 +486,8 @@ class AuthorityGate(JunctionGate):
             out.append(found)
         for c in sorted({fleet.family[t[2]] for t in todo}):
             mine = [t for t in todo if fleet.family[t[2]] == c]
-            pad = np.vstack([fleet.pad(row, idx) for _, _, row, _, _, idx in mine])
+            pad = fleet.pad_rows(np.concatenate([np.full(len(idx), row) for _, _, row, _, _, idx in mine]),
+                                 np.concatenate([idx for *_, idx in mine]))  # one lookup for all
             lo, hi = self.classes[c].claim_box(
                 pad, np.concatenate([H[idx] for *_, H, idx in mine]),
                 np.concatenate([H[np.minimum(idx + 1, len(H) - 1)] for *_, H, idx in mine]))
@@ -580,12 +581,15 @@ class AuthorityGate(JunctionGate):
         """Which rows ``j`` have their requested stop point (``k + ahead``) on row ``row``'s route
         (within ``0.6 δ`` of one of its waypoints: the same lanes, ahead of it or behind)."""
         W = fleet.route(row)[0]
-        out = np.zeros(len(j), dtype=bool)
-        for n, jj in enumerate(j.tolist()):
+        if not len(j):
+            return np.zeros(0, dtype=bool)
+        pts, tol = [], []
+        for jj in j.tolist():
             Wj, _, kj = fleet.route(jj)
-            p = Wj[min(kj + ahead, len(Wj) - 1)]
-            out[n] = np.linalg.norm(W - p, axis=1).min() <= 0.6 * self.classes[fleet.family[jj]].delta
-        return out
+            pts.append(Wj[min(kj + ahead, len(Wj) - 1)])
+            tol.append(0.6 * self.classes[fleet.family[jj]].delta)
+        d = np.hypot(W[:, None, 0] - np.array(pts)[None, :, 0], W[:, None, 1] - np.array(pts)[None, :, 1])
+        return d.min(axis=0) <= np.array(tol)
 
     def withhold(self, t: int, fleet: JunctionFleet, requesting: np.ndarray, new_lo: np.ndarray,
                  new_hi: np.ndarray) -> np.ndarray:

@@ -122,10 +122,13 @@ class KeepOut:
             hits = np.all((b_lo[q][:, :, None, :] <= hi[None, None]) & (b_hi[q][:, :, None, :] >= lo[None, None]),
                           axis=3)
             withheld = []
-            for j, hit in zip(near.tolist(), hits):
-                if not hit[1].any():  # the asked-for box misses the whole path
+            asks = hits[:, 1].any(axis=1)  # the asked-for box meets the path somewhere
+            queue = np.zeros(len(near), dtype=bool)
+            queue[asks] = on_route(fleet, row, near[asks], ahead=1)
+            for j, hit, ask, q in zip(near.tolist(), hits, asks.tolist(), queue.tolist()):
+                if not ask:
                     continue
-                if on_route(fleet, row, np.array([j]), ahead=1)[0]:
+                if q:
                     hit = hit[:, 1:]  # its queue: the path after the holder's stop point
                 elif j in co:
                     continue
