@@ -180,17 +180,28 @@ class SumoWorld:
         """The claims' padding (n, 4), one-sided (:meth:`bridge.sumo_body.PadTable.pads`), of vehicles
         ``ids`` for their waypoints ``k`` (n,), for the positions still ahead of them (from the
         furthest reference point reached, less :data:`~bridge.sumo_body.BACK_M`); None without the
-        network's geometry.  :meth:`claim_pad_runs` without the runs; one vehicle's many waypoints
-        (the junction gate's paths) in one go (:meth:`~bridge.sumo_body.PadTable.pads_many`)."""
+        network's geometry.  :meth:`claim_pad_runs` without the runs; each run of one vehicle's many
+        waypoints (the junction gate's paths, one or several vehicles' at once) in one go
+        (:meth:`~bridge.sumo_body.PadTable.pads_many`)."""
         if self.net is None:
             return None
+        ids = list(ids)
         n = len(ids)
-        if n > 1 and list(ids).count(ids[0]) == n:
-            t = self._pads.get(ids[0])
-            if t is None:
-                return np.zeros((n, 4))
-            return t.pads_many(k, int(self.pad_windows(ids[:1])[0]))
-        return self.claim_pad_runs(ids, k)[0]
+        k = np.asarray(k).reshape(-1)
+        first = np.flatnonzero(np.r_[True, np.array(ids[1:], dtype=object) != np.array(ids[:-1], dtype=object)]) \
+            if n > 1 else np.zeros(min(n, 1), dtype=np.intp)
+        if len(first) == n:  # no vehicle twice in a row
+            return self.claim_pad_runs(ids, k)[0]
+        out = np.zeros((n, 4))
+        ends = np.r_[first[1:], n]
+        single = first[ends - first == 1]
+        for a, b in zip(first[ends - first > 1].tolist(), ends[ends - first > 1].tolist()):
+            t = self._pads.get(ids[a])
+            if t is not None:
+                out[a:b] = t.pads_many(k[a:b], int(self.pad_windows(ids[a:a + 1])[0]))
+        if len(single):
+            out[single] = self.claim_pad_runs([ids[i] for i in single.tolist()], k[single])[0]
+        return out
 
     def pad_windows(self, ids) -> np.ndarray:
         """The first sample (int64, (n,)) of each vehicle's padding window (-1 without a table): the
