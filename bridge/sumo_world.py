@@ -188,17 +188,19 @@ class SumoWorld:
         ids = list(ids)
         n = len(ids)
         k = np.asarray(k).reshape(-1)
-        first = np.flatnonzero(np.r_[True, np.array(ids[1:], dtype=object) != np.array(ids[:-1], dtype=object)]) \
-            if n > 1 else np.zeros(min(n, 1), dtype=np.intp)
-        if len(first) == n:  # no vehicle twice in a row
+        same = np.array(ids[1:], dtype=object) == np.array(ids[:-1], dtype=object)
+        if not same.any():  # no vehicle twice in a row
             return self.claim_pad_runs(ids, k)[0]
         out = np.zeros((n, 4))
+        first = np.flatnonzero(np.r_[True, ~same])
         ends = np.r_[first[1:], n]
-        single = first[ends - first == 1]
-        for a, b in zip(first[ends - first > 1].tolist(), ends[ends - first > 1].tolist()):
+        runs = ends - first > 1
+        single = first[~runs]
+        starts = first[runs].tolist()
+        for a, b, j0 in zip(starts, ends[runs].tolist(), self.pad_windows([ids[a] for a in starts]).tolist()):
             t = self._pads.get(ids[a])
             if t is not None:
-                out[a:b] = t.pads_many(k[a:b], int(self.pad_windows(ids[a:a + 1])[0]))
+                out[a:b] = t.pads_many(k[a:b], int(j0))
         if len(single):
             out[single] = self.claim_pad_runs([ids[i] for i in single.tolist()], k[single])[0]
         return out

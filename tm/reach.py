@@ -53,7 +53,7 @@ from tm.kernels import reach_boxes, timed_pairs_plain, timed_pairs_tight, union_
 from tm.slot_boxes import SlotBoxes
 
 __all__ = ["ReachModel", "ReachClaims", "reach_claims", "reach_claims_many", "claims_conflict", "pairwise_conflicts",
-           "world_aabb", "claim_polygons", "candidate_pairs", "pad_slots", "split_pad", "slot_aabb", "union_aabb",
+           "world_aabb", "claim_polygons", "claim_polygons_of", "candidate_pairs", "pad_slots", "split_pad", "slot_aabb", "union_aabb",
            "PREFILTER_TOL_FACTOR"]
 
 #: The per-slot world bounding boxes that pre-filter the ``timed`` check are compared with
@@ -514,8 +514,9 @@ def claim_polygons_of(claims: ReachClaims, rows: np.ndarray) -> tuple[np.ndarray
     owner = np.repeat(np.arange(len(rows)), ct.sum(axis=1))
     box = ranges(st.ravel(), ct.ravel())
     # each box once per row (a slot's box may stand for several steps)
-    key = np.unique(owner.astype(np.int64) * max(len(u.centre), 1) + box)
-    owner, box = (key // max(len(u.centre), 1)).astype(np.intp), (key % max(len(u.centre), 1)).astype(np.intp)
+    q = max(len(u.centre), 1)
+    key = np.unique(owner.astype(np.int64) * q + box)
+    owner, box = (key // q).astype(np.intp), (key % q).astype(np.intp)
     polys = u.centre[box][:, None, :] + rectangles(u.heading[box], 2.0 * u.half[box, 0], 2.0 * u.half[box, 1])
     return polys, owner
 
