@@ -56,7 +56,7 @@ from tm.pedestrians import PedestrianRule, footprint_contacts
 from tm.crossing_gate import CrossingGate
 from tm.monitor import Monitor
 from tm.settings import TMSettings
-from tm.signals import SignalBook, SignalSettings, StopLines
+from tm.signals import SignalBook, SignalSettings, StopLines, stop_bounds
 
 #: Valid values of :attr:`CosimSettings.controller`.
 CONTROLLERS = ("paper", "authority")
@@ -763,10 +763,7 @@ class Cosim:
             W = np.asarray(sp.waypoints, dtype=float)
             Hw = _headings(W)
             top = min(g.vclass.v_max, float(rs.env[min(plan.k + 1, K - 1)]))
-            # and before its first junction guard (an entry line it may not pass without the token)
-            limit = plan.stop_max
-            if isinstance(self.junctions, AuthorityGate):
-                limit = min(limit, self.junctions.entry_limit(W, Hw, sp.vclass, sp.id))
+            limit = self._first_stop_limit(sp, W, Hw)
             for k, v in start_ladder(plan, top):
                 if k == 0 and v == 0.0:
                     continue  # the old start: None, last
@@ -792,6 +789,33 @@ class Cosim:
         out.append(None)
         self._start_cache[sp.id] = (sp, out, poses)
         return out
+
+    def _first_stop_limit(self, sp: VehicleSpec, W: np.ndarray, Hw: np.ndarray) -> int:
+        """The furthest first stop point a moving start of ``sp`` (waypoints ``W``, arriving headings
+        ``Hw``) may have: its plan's ``stop_max`` (its first planned stop), and before whatever a
+        request would have to be let past -- its first junction guard (the token:
+        :meth:`tm.authority_gate.AuthorityGate.entry_limit`), its first signalised stop line (the
+        light: :func:`tm.signals.stop_bounds`, the bound the signal rule acts on) and its first run
+        over a pedestrian crossing (:meth:`tm.crossing_gate.CrossingGate.runs`).  A vehicle never
+        enters committed to a junction, a light or a crossing it has not asked for; other edges
+        ahead are free to claim, as SUMO's ``departPos="last"`` at speed has them."""
+        limit = sp.depart.stop_max
+        if isinstance(self.junctions, AuthorityGate):
+            limit = min(limit, self.junctions.entry_limit(W, Hw, sp.vclass, sp.id))
+        lines = sp.stop_lines
+        if lines is not None and len(lines):
+            reach = self.junctions.classes[sp.vclass].hold + 0.5 * self.classes[sp.vclass].length
+            bound = stop_bounds(lines.arc, lines.s_line, reach)
+            bound = bound[bound >= 0]  # -1: it starts at or past that line, which never acts on it
+            if len(bound):
+                limit = min(limit, int(bound.min()))
+        gate = self.filters.crossing_gate
+        if gate is not None:
+            entry = gate.runs(sp.id, sp.vclass, W, Hw)[0]
+            entry = entry[entry > 0]  # a run it starts in: the gate acts on runs entered later only
+            if len(entry):
+                limit = min(limit, int(entry[0]) - 1)
+        return limit
 
     def _start_slack(self, g: _Group, rs, k: int, v: float, stop: int) -> int:
         """Tube levels a moving start (centre on waypoint ``k`` at ``v`` m/s, first stop point ``stop``)

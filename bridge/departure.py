@@ -6,10 +6,16 @@ back at the lane's start (``departPos="base"``), so on motorway scenarios its ve
 longer routes from rest (SUMO's ``A10KW``: ~1.2 km longer) and a 2,500 veh/h flow could not enter.
 
 A vehicle's :class:`DepartPlan` (built with its spec, :func:`depart_plan`) holds the waypoint SUMO
-would start its centre on, the speed it would have there, and the last waypoint its first stop
-point may be (the front still on the first edge; admission also keeps it before the route's first
-junction guard, :meth:`tm.authority_gate.AuthorityGate.entry_limit`: a vehicle never enters already
-committed to a junction, whose token and signal it has not asked for).  Admission (:class:`bridge.cosim.Cosim`)
+would start its centre on (on its first edge), the speed it would have there, and the last waypoint
+its first stop point may be (its route's last, or its first planned stop).  Admission keeps the
+first stop point before whatever the vehicle would have to be let past
+(:meth:`bridge.cosim.Cosim._first_stop_limit`): the route's first junction guard
+(:meth:`tm.authority_gate.AuthorityGate.entry_limit`), its first signalised stop line and its first
+pedestrian crossing, so a vehicle never enters committed to a junction, a light or a crossing it has
+not asked for.  Until 2026-12-06 the first stop point also had to leave the front on the first edge:
+a vehicle SUMO inserts at the end of a short motorway edge at speed then had to start a braking
+distance or more further back, or slower (SUMO's ``A10KW``: 75 of its 601 vehicles arrived in 180 s,
+98 without that limit).  Admission (:class:`bridge.cosim.Cosim`)
 tries the starts of :func:`start_ladder` in order -- the plan's speed, half of it, at rest; at each,
 the plan's position and two thirds and one third of the way back to the lane's start, then the
 start itself -- and takes the first whose claims are free (condition (12)): the last is the old
@@ -82,20 +88,22 @@ def depart_plan(arc: np.ndarray, length: float, edge_end: float, pos_m: float | 
     """The plan of a vehicle whose waypoints lie at route arcs ``arc`` (K,) (the first: its old start,
     back at the lane's start), ``length`` m long, on a route leaving its first edge at ``edge_end``.
 
-    ``pos_m``: SUMO's ``departPos`` (the front along the first lane; negative: from its end, which
-    needs ``first_lane_m``, the lane's length); ``speed``: ``departSpeed`` (m/s, ``inf``: as fast
-    as allowed).  None when the vehicle starts as before (at rest on its first waypoint)."""
+    ``pos_m``: SUMO's ``departPos`` (the front along the first lane, at most its end; negative: from
+    its end, which needs ``first_lane_m``, the lane's length); ``speed``: ``departSpeed`` (m/s,
+    ``inf``: as fast as allowed).  Its first stop point may be as far as the route's last waypoint
+    (admission limits it further: module notes).  None when the vehicle starts as before (at rest on
+    its first waypoint)."""
     arc = np.asarray(arc, dtype=float)
     v = 0.0 if speed is None or not speed > 0 else float(speed)
-    stop_max = int(np.searchsorted(arc, edge_end - 0.5 * length, side="right")) - 1
-    stop_max = min(max(stop_max, 0), len(arc) - 1)
+    stop_max = len(arc) - 1
+    on_edge = int(np.searchsorted(arc, edge_end - 0.5 * length, side="right")) - 1
     k = 0
     if pos_m is not None:
         front = float(pos_m)
         if front < 0 and first_lane_m is not None:
             front += float(first_lane_m)
         centre = min(front - 0.5 * length, edge_end - 0.5 * length)
-        k = min(max(int(np.searchsorted(arc, centre, side="right")) - 1, 0), stop_max)
+        k = min(max(int(np.searchsorted(arc, centre, side="right")) - 1, 0), max(on_edge, 0))
     if k == 0 and v == 0.0:
         return None
     return DepartPlan(k, v, stop_max)

@@ -4,6 +4,8 @@ a property), the route files' attributes, and a real SUMO run (``departPos="last
 ``departSpeed="max"``, as SUMO's A10KW demo writes them)."""
 
 import math
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -17,7 +19,9 @@ from bridge.departure import DepartPlan, depart_plan, start_ladder
 from bridge.layouts import subsample
 from bridge.scenarios import kpi_tables
 from controllers.classes import builtin_classes
+from tm.pedestrians import PedestrianRule, PedestrianSettings
 from tm.settings import TMSettings
+from tm.signals import StopLines, stop_bounds
 from tests.sumo_runs import run_cfg, write_cfg
 
 CLASSES = builtin_classes()
@@ -27,17 +31,18 @@ CLASSES = builtin_classes()
 
 def test_depart_plan_position_speed_and_limits():
     """SUMO's departPos is the front: the centre starts half a length behind it, on the waypoint at or
-    before it; negative counts from the lane's end; the first stop point may not pass the first edge's
-    end; base at rest is no plan."""
+    before it; negative counts from the lane's end; a position past the first edge's end starts the
+    body on it; the first stop point may be anywhere on the route (admission limits it: the tests
+    below); base at rest is no plan."""
     arc = np.arange(0.0, 301.0, 3.0) + 3.0  # waypoint arcs from the old start (centre 3 m in)
     plan = depart_plan(arc, 5.0, 200.0, 100.0, math.inf)
     assert plan.k == int(np.searchsorted(arc, 97.5, side="right")) - 1 and arc[plan.k] <= 97.5 < arc[plan.k + 1]
     assert plan.speed == math.inf
-    assert arc[plan.stop_max] <= 200.0 - 2.5 < arc[plan.stop_max + 1]
+    assert plan.stop_max == len(arc) - 1
     tail = depart_plan(arc, 5.0, 200.0, -10.0, None, first_lane_m=200.0)  # 10 m before the lane's end
     assert arc[tail.k] <= 187.5 < arc[tail.k + 1] and tail.speed == 0.0
-    last = depart_plan(arc, 5.0, 200.0, 1e6, 10.0)  # past the lane: as far as its first stop point may be
-    assert last.k == last.stop_max
+    last = depart_plan(arc, 5.0, 200.0, 1e6, 10.0)  # past the lane: the body's front at the edge's end
+    assert arc[last.k] <= 197.5 < arc[last.k + 1] and last.stop_max == len(arc) - 1
     assert depart_plan(arc, 5.0, 200.0, None, None) is None
     assert depart_plan(arc, 5.0, 200.0, 2.0, 0.0) is None  # SUMO's base (front at its length): the old start
     with pytest.raises(ValueError, match="stop_max"):
@@ -124,6 +129,43 @@ def test_a_moving_start_stops_before_the_first_junction_guard():
         g = sim.groups["car"]
         limit = sim.junctions.entry_limit(W, np.r_[0.0, np.zeros(len(W) - 1)], "car")
         assert 0 < int(g.k[0]) <= limit < len(W) - 1
+        assert (abs(np.hypot(*g.X[0, 2:4]) - 13.89) < 1e-9) == fast
+
+
+def test_a_moving_start_stops_before_the_first_stop_line():
+    """A signalised stop line 25 m ahead (no junction zone): a car planned at full speed enters with its
+    first stop point at or before the line's bound (the switch the signal rule acts on), so slower
+    than the plan, as it cannot stop before the line from full speed; with the line 200 m ahead
+    it enters at full speed.  A line it starts past (bound -1) does not hold it back."""
+    W = _lane(300.0)
+    arc = np.r_[0.0, np.cumsum(np.hypot(*np.diff(W, axis=0).T))]
+    for x, fast in ((25.0, False), (200.0, True)):
+        lines = StopLines(arc, np.array([-50.0, x]), np.array([0, 1]))
+        sp = VehicleSpec("a", "car", W, depart=DepartPlan(0, math.inf, len(W) - 1), stop_lines=lines)
+        sim = Cosim(CLASSES, [sp], CosimSettings(controller="authority"))
+        sim._admit(0.0)
+        g = sim.groups["car"]
+        reach = sim.junctions.classes["car"].hold + 0.5 * CLASSES["car"].length
+        bound = int(stop_bounds(arc, np.array([x]), reach)[0])
+        assert 0 < int(g.k[0]) <= bound < len(W) - 1
+        assert (abs(np.hypot(*g.X[0, 2:4]) - 13.89) < 1e-9) == fast
+
+
+def test_a_moving_start_stops_before_the_first_crossing():
+    """A pedestrian crossing 25 m ahead (authority mode with pedestrians, no junction zone): a car
+    planned at full speed enters with its first stop point before the crossing gate's first run over
+    it, so slower than the plan; with the crossing 200 m ahead it enters at full speed."""
+    W = _lane(300.0)
+    for x, fast in ((25.0, False), (200.0, True)):
+        crossing = np.array([[x, -4.0], [x + 4.0, -4.0], [x + 4.0, 4.0], [x, 4.0]])
+        sp = VehicleSpec("a", "car", W, depart=DepartPlan(0, math.inf, len(W) - 1))
+        sim = Cosim(CLASSES, [sp], CosimSettings(controller="authority"),
+                    pedestrians=PedestrianRule(PedestrianSettings(), [crossing], 0.1), crossings=[crossing])
+        sim._admit(0.0)
+        g = sim.groups["car"]
+        H = np.r_[0.0, np.zeros(len(W) - 1)]
+        entry = int(sim.filters.crossing_gate.runs("a", "car", W, H)[0][0])
+        assert 0 < int(g.k[0]) < entry
         assert (abs(np.hypot(*g.X[0, 2:4]) - 13.89) < 1e-9) == fast
 
 
@@ -277,3 +319,33 @@ def test_sumo_depart_last_at_max_speed(tmp_path, netgenerate_grid):
     rc, _ = run_cfg(cfg, tmp_path / "b", "--duration", "50", "--baseline", "sumo")
     b = pd.read_csv(tmp_path / "b" / "vehicles.csv").set_index("id")
     assert rc == 0 and b.loc["last", "depart_speed_mps"] > 10.0  # SUMO's tripinfo departSpeed
+
+
+def test_sumo_depart_last_at_speed_claims_past_a_short_first_edge(tmp_path):
+    """SUMO's A10KW pattern: a 60 m first edge joined to a 400 m one at a junction with nothing else
+    (no zone, no light), ``departPos="last"``, ``departSpeed="max"``.  The car's braking distance at
+    13.89 m/s (38.6 m at 2.5 m/s^2) does not fit between SUMO's place for it and the first edge's
+    end; its first stop point may lie on the next edge, so it enters where SUMO puts it (the
+    waypoint at or before its centre) and at SUMO's speed -- its route from there ~400 m, where a
+    stop point kept on the first edge made it start 40 m or more further back (or slower).  0
+    collisions, and it arrives."""
+    (tmp_path / "n.nod.xml").write_text('<nodes><node id="a" x="0" y="0"/><node id="b" x="60" y="0"/>'
+                                        '<node id="c" x="460" y="0"/></nodes>')
+    (tmp_path / "n.edg.xml").write_text('<edges><edge id="ab" from="a" to="b" numLanes="1" speed="13.89"/>'
+                                        '<edge id="bc" from="b" to="c" numLanes="1" speed="13.89"/></edges>')
+    subprocess.run([str(Path(sys.executable).parent / "netconvert"), "-n", str(tmp_path / "n.nod.xml"),
+                    "-e", str(tmp_path / "n.edg.xml"), "--geometry.remove", "false", "-o", str(tmp_path / "n.net.xml")],
+                   check=True, capture_output=True)
+    (tmp_path / "d.rou.xml").write_text('<routes><vType id="car" length="5" width="1.8" maxSpeed="13.89"/>'
+                                        '<vehicle id="v" type="car" depart="0" departPos="last" departSpeed="max">'
+                                        '<route edges="ab bc"/></vehicle></routes>')
+    cfg = write_cfg(tmp_path / "s.sumocfg", "n.net.xml", routes=["d.rou.xml"], begin=0, end=60)
+    rc, s = run_cfg(cfg, tmp_path / "m", "--duration", "50")
+    assert rc == 0 and s["complete"], s.get("error")
+    assert s["collisions_sumo"] == 0 and s["collisions_geometric"] == 0 and s["tube_escapes"] == 0
+    v = pd.read_csv(tmp_path / "m" / "vehicles.csv").set_index("id")
+    assert v.loc["v", "depart_speed_mps"] == pytest.approx(13.89, abs=1e-6)
+    # SUMO's centre 57.5 m along ab, muvsim's on the waypoint at or before it (δ = 3 m): 400 m of bc
+    # ahead, less the last body length kept on bc (tolerance: one waypoint and a body length)
+    assert 390.0 <= v.loc["v", "route_length_m"] <= 410.0
+    assert v.loc["v", "arrival_s"] < 50.0
