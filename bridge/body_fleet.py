@@ -21,6 +21,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from bridge.body_kernels import nearest_on_segments
+
 if TYPE_CHECKING:  # bridge.sumo_body builds its own bodies with this module (RouteBody.bodies)
     from bridge.sumo_body import RouteBody
 
@@ -59,7 +61,7 @@ class _Ragged:
         span = np.array([a[-1] for _, a in lines]) + _SHIFT_GAP_M if lines else np.zeros(0)
         self.base = np.concatenate([[0.0], np.cumsum(span)[:-1]]) if lines else span
         self.G = self.A + np.repeat(self.base, count)
-        self.Px, self.Py = self.P[:, 0], self.P[:, 1]
+        self.Px, self.Py = np.ascontiguousarray(self.P[:, 0]), np.ascontiguousarray(self.P[:, 1])
         #: per polyline: ceil(log2(its segment count)) (:meth:`nearest_xy`'s groups)
         self.group = _log2_ceil(count - 1)
         self.segs = None
@@ -165,6 +167,20 @@ class _Ragged:
         return self._nearest(i0, i1, px, py, nseg)
 
     def _nearest(self, i0, i1, px, py, nseg):
+        """The projection of :meth:`nearest_xy` on rows of like segment counts (``nseg``: at most one
+        each -- the first only -- or more): :func:`bridge.body_kernels.nearest_on_segments`, the
+        same floats as :meth:`_nearest_numpy`."""
+        shape = np.shape(px)
+        n = shape[-1] if len(shape) else 1
+        sig, off = nearest_on_segments(self.Px, self.Py, self.A, np.ascontiguousarray(i0, dtype=np.intp),
+                                       np.ascontiguousarray(i1, dtype=np.intp),
+                                       np.ascontiguousarray(px, dtype=float).reshape(-1, n),
+                                       np.ascontiguousarray(py, dtype=float).reshape(-1, n),
+                                       int(nseg.max(initial=0)) <= 1)
+        return sig.reshape(shape), off.reshape(shape)
+
+    def _nearest_numpy(self, i0, i1, px, py, nseg):
+        """:meth:`_nearest` in numpy (the reference the compiled loop is tested against)."""
         # the operations of sumo_body._project, component by component: (w . d) = wx dx + wy dy, as
         # numpy sums an axis of two; the first of equal distances (argmin)
         M = int(nseg.max(initial=0))

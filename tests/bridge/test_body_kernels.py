@@ -76,3 +76,44 @@ def test_padding_lookups_equal_the_numpy_code(seed, n, ties):
     j0 = int(rng.integers(0, n))
     assert np.array_equal(path_pads_many(sig, arc_k, ks, box_lo, box_hi, reach_T, half, j0),
                           _ref_many(sig, arc_k, ks, box_lo, box_hi, reach_T, half, j0))
+
+
+@st.composite
+def _ragged_queries(draw):
+    """Polylines of 1 to 12 segments (some of zero length, some with ties in distance), rows on
+    them of like or mixed segment counts, points near and far, one or three offsets a row."""
+    from bridge.body_fleet import _Ragged
+
+    lines = []
+    for _ in range(draw(st.integers(1, 5))):
+        m = draw(st.integers(2, 13))
+        P = np.array(draw(st.lists(st.tuples(st.integers(-20, 20), st.integers(-20, 20)), min_size=m, max_size=m)),
+                     dtype=float) * draw(st.sampled_from([1.0, 0.5, 0.37]))
+        A = np.r_[0.0, np.cumsum(np.hypot(*np.diff(P, axis=0).T))]
+        lines.append((P, A))
+    R = _Ragged(lines, per_segment=draw(st.booleans()))
+    n = draw(st.integers(1, 8))
+    g = np.array(draw(st.lists(st.integers(0, len(lines) - 1), min_size=n, max_size=n)), dtype=np.intp)
+    B = draw(st.sampled_from([1, 3]))
+    pts = np.array(draw(st.lists(st.floats(-30, 30, allow_nan=False, width=32), min_size=2 * B * n,
+                                 max_size=2 * B * n)), dtype=float).reshape(2, B, n)
+    if B == 1 and draw(st.booleans()):
+        pts = pts[:, 0]
+    return R, R.start[g], R.start[g] + R.count[g], pts[0], pts[1]
+
+
+@settings(max_examples=300, deadline=None)
+@given(_ragged_queries(), st.booleans())
+def test_nearest_on_segments_is_the_numpy_projection(q, first_only):
+    """The compiled projection (bridge.body_kernels.nearest_on_segments, FleetBodies' largest cost
+    in building padding tables) gives the numpy code's arc positions and offsets exactly (tolerance
+    0: the same operations in the same order), on every segment or the first only, one or several
+    points a row, rows of different lengths."""
+    R, i0, i1, px, py = q
+    nseg = i1 - i0 - 1
+    if first_only:
+        nseg = np.minimum(nseg, 1)
+    got = R._nearest(i0, i1, px, py, nseg)
+    want = R._nearest_numpy(i0, i1, px, py, nseg)
+    assert got[0].shape == want[0].shape == np.shape(px)
+    assert np.array_equal(got[0], want[0]) and np.array_equal(got[1], want[1])
