@@ -169,7 +169,8 @@ class _Ragged:
     def _nearest(self, i0, i1, px, py, nseg):
         """The projection of :meth:`nearest_xy` on rows of like segment counts (``nseg``: at most one
         each -- the first only -- or more): :func:`bridge.body_kernels.nearest_on_segments`, the
-        same floats as :meth:`_nearest_numpy`."""
+        same floats as the numpy form it replaced (``tests/bridge/test_body_kernels.py`` keeps it as
+        the reference)."""
         shape = np.shape(px)
         n = shape[-1] if len(shape) else 1
         sig, off = nearest_on_segments(self.Px, self.Py, self.A, np.ascontiguousarray(i0, dtype=np.intp),
@@ -178,36 +179,6 @@ class _Ragged:
                                        np.ascontiguousarray(py, dtype=float).reshape(-1, n),
                                        int(nseg.max(initial=0)) <= 1)
         return sig.reshape(shape), off.reshape(shape)
-
-    def _nearest_numpy(self, i0, i1, px, py, nseg):
-        """:meth:`_nearest` in numpy (the reference the compiled loop is tested against)."""
-        # the operations of sumo_body._project, component by component: (w . d) = wx dx + wy dy, as
-        # numpy sums an axis of two; the first of equal distances (argmin)
-        M = int(nseg.max(initial=0))
-        if M <= 1:  # one segment each: no search
-            J = i0
-            dx, dy, ln2, sq, ux, uy = self._segments(J, ("Dx", "Dy", "ln2", "sq", "Ux", "Uy"))
-            ax, ay = self.Px[J], self.Py[J]
-            u = np.clip(((px - ax) * dx + (py - ay) * dy) / ln2, 0.0, 1.0)
-            qx, qy = ax + u * dx, ay + u * dy
-            return self.A[J] + u * sq, ux * (py - qy) - uy * (px - qx)
-        J = i0[:, None] + np.arange(M)[None, :]  # (n, M)
-        valid = J < (i1 - 1)[:, None]
-        J = np.where(valid, J, i0[:, None])
-        dx, dy, ln2 = self._segments(J, ("Dx", "Dy", "ln2"))
-        ax, ay = self.Px[J], self.Py[J]
-        pxm, pym = px[..., None], py[..., None]  # (..., n, 1) against (n, M)
-        u = np.clip(((pxm - ax) * dx + (pym - ay) * dy) / ln2, 0.0, 1.0)
-        qx, qy = ax + u * dx, ay + u * dy
-        dist = np.where(valid, np.hypot(pxm - qx, pym - qy), np.inf)
-        j = np.argmin(dist, axis=-1)[..., None]
-
-        def pick(a):
-            return np.take_along_axis(np.broadcast_to(a, dist.shape), j, axis=-1)[..., 0]
-
-        uj, qxj, qyj, jj = pick(u), pick(qx), pick(qy), pick(J)
-        sq, ux, uy = self._segments(jj, ("sq", "Ux", "Uy"))
-        return self.A[jj] + uj * sq, ux * (py - qyj) - uy * (px - qxj)
 
 
 class FleetBodies:

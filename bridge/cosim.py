@@ -804,8 +804,7 @@ class Cosim:
             limit = min(limit, self.junctions.entry_limit(W, Hw, sp.vclass, sp.id))
         lines = sp.stop_lines
         if lines is not None and len(lines):
-            reach = self.junctions.classes[sp.vclass].hold + 0.5 * self.classes[sp.vclass].length
-            bound = stop_bounds(lines.arc, lines.s_line, reach)
+            bound = stop_bounds(lines.arc, lines.s_line, self._line_reach(sp.vclass))
             bound = bound[bound >= 0]  # -1: it starts at or past that line, which never acts on it
             if len(bound):
                 limit = min(limit, int(bound.min()))
@@ -816,6 +815,12 @@ class Cosim:
             if len(entry):
                 limit = min(limit, int(entry[0]) - 1)
         return limit
+
+    def _line_reach(self, vclass: str) -> float:
+        """How far past its stop point a vehicle of ``vclass`` at rest may reach with its front (its hold
+        region plus half its length): the ``reach`` of its signalised stop lines
+        (:func:`tm.signals.stop_bounds`), at admission and in the signal book alike."""
+        return self.junctions.classes[vclass].hold + 0.5 * self.classes[vclass].length
 
     def _start_slack(self, g: _Group, rs, k: int, v: float, stop: int) -> int:
         """Tube levels a moving start (centre on waypoint ``k`` at ``v`` m/s, first stop point ``stop``)
@@ -865,7 +870,7 @@ class Cosim:
         self.records[sp.id].admitted_s = t_s
         self._start_cache.pop(sp.id, None)
         if sp.stop_lines is not None:
-            reach = self.junctions.classes[sp.vclass].hold + 0.5 * g.vclass.length
+            reach = self._line_reach(sp.vclass)
             rest_lead = 0.5 * g.vclass.length - g.ctl.settings.standoff if self.authority else None
             self.signal_book.add(sp.id, sp.stop_lines, reach, rest_lead)
         self.world.insert(sp, g.vclass, 0 if start is None else start.k)
