@@ -457,13 +457,15 @@ class AuthorityGate(JunctionGate):
         guard from there (it arrives inside) or the stop point is past the slot."""
         return self._wide_paths(fleet, [(row, z, first)])[0]
 
-    def _path_idx(self, fleet: JunctionFleet, row: int, z: int, first: int) -> np.ndarray | None:
+    def _path_idx(self, fleet: JunctionFleet, row: int, z: int, first: int,
+                  to_end: bool = False) -> np.ndarray | None:
         """The waypoints of row ``row``'s path through zone ``z`` from waypoint ``first`` to the exit
         slot (:meth:`_wide_path`, :meth:`_wide_polygons`); None when the route does not leave the guard
-        from there or the stop point is past the slot."""
+        from there (``to_end``: then to the route's last waypoint, in the guard) or the stop point is
+        past the slot."""
         k = fleet.route(row)[2]
         span = self._span_of(fleet, row, z, k + 1) or self._span_of(fleet, row, z, k)
-        if span is None or not span[2] or first > span[1]:
+        if span is None or not (span[2] or to_end) or first > span[1]:
             return None
         return np.arange(max(first, 0), span[1] + 1)
 
@@ -664,7 +666,11 @@ class AuthorityGate(JunctionGate):
         candidate would stand inside the guard with the token, holding back every waiter whose
         corridor meets its own (SUMO's ``fkk_in``, whose lights change only by hand: bicycle
         ``4_left.1`` took ``gneJ21``'s token to turn left past the front of car ``4_right.0`` at its
-        red, stopped 0.7 m short of its bumper's line and held the token for the rest of the run)."""
+        red, stopped 0.7 m short of its bumper's line and held the token for the rest of the run).
+        A route that ends in the guard counts to its end: on the generated ``tlsgrid`` car 29, whose
+        route ends at its lane's end beside junction ``B1``, took the token behind car 27 standing at
+        the red (its corridor's last waypoint 0.08 m clear of 27's claim box, its hold box there 2.6 m
+        into it); when the light turned green 27 waited for that token and 29 for 27, for good."""
         hits = super()._standing_hits(fleet, zq, rq, first, c_lo, c_hi, zs, rs)
         for q in np.flatnonzero(~hits).tolist():
             z, row = int(zq[q]), int(rq[q])
@@ -683,15 +689,16 @@ class AuthorityGate(JunctionGate):
 
     def _wide_polygons(self, fleet: JunctionFleet, row: int, z: int) -> np.ndarray | None:
         """Row ``row``'s wide path through zone ``z`` beyond its stop point (the boxes of
-        :meth:`_wide_path` from the next waypoint on) as oriented boxes (h n, 4, 2), each waypoint's at
-        its arriving and leaving headings; None when the route does not leave the guard from there."""
+        :meth:`_wide_path` from the next waypoint on, to the route's end where it ends in the guard)
+        as oriented boxes (h n, 4, 2), each waypoint's at its arriving and leaving headings; None when
+        no waypoint is left there."""
         W, H, k = fleet.route(row)
         key = (fleet.ids[row], z, k)
         found = self._wide_poly.get(key, _UNSET)
         if found is _UNSET:
             if len(self._wide_poly) > 100_000:  # stale keys: start over
                 self._wide_poly.clear()
-            idx = self._path_idx(fleet, row, z, k + 1)
+            idx = self._path_idx(fleet, row, z, k + 1, to_end=True)
             found = None
             if idx is not None:
                 found = self.classes[fleet.family[row]].corridor_polygons(W[idx], fleet.pad(row, idx), H[idx],

@@ -948,6 +948,35 @@ def test_a_candidate_whose_corridor_meets_a_car_at_a_red_waits_without_the_token
     assert asked == {"C"} == _holders(gate)
 
 
+
+def test_a_route_ending_in_the_guard_behind_a_car_at_a_red_waits_without_the_token():
+    """The generated ``tlsgrid``: car 29, whose route ends at its lane's end beside a junction, took
+    the token behind car 27 standing at the red in the guard on the same lane: its last waypoint
+    lay 0.08 m clear of 27's claim box (the rule of :class:`JunctionGate`: waypoints in the box),
+    its hold box there 2.6 m into it.  At green 27 waited for the token and 29 for 27, for good.
+    C's route ends at x = -7 (waypoint 23, inside the guard: no exit slot); R stands at a red on
+    C's lane at x = -4.5, its hold box from x = -6.75 (0.25 m clear of C's last waypoint, 2.0 m into
+    C's hold box there).  C waits (``red_yielded``); with R at x = -1.5 (hold box from -3.75, 0.5 m
+    clear of C's corridor box at x = -7, ±2.75 m) C takes the token; with the wide path cut at the
+    exit slot as before (none here), C takes it beside R."""
+    def run(r_x, gate=None):
+        gate = gate or _gate()
+        c = ((-30.0, -1.6), (-7.0, -1.6))
+        r = ((r_x - 20.0, -1.6), (r_x + 65.0, -1.6))
+        scene = Scene({"C": c, "R": r}, k={"C": ENTRY - 1, "R": 20}, idle="R")
+        assert np.allclose(scene.routes[1][0][20], (r_x, -1.6)) and len(scene.routes[0][0]) == 24
+        gate.give_back(["R"])  # R stands at a red (tm.signals)
+        return gate, scene.withhold(gate)
+
+    gate, asked = run(-4.5)
+    assert asked == set() and _holders(gate) == set() and gate.red_yielded == 1
+    gate, asked = run(-1.5)
+    assert asked == {"C"} == _holders(gate) and gate.red_yielded == 0
+    gate = _gate()
+    gate._path_idx = lambda f, r, z, first, to_end=False: AuthorityGate._path_idx(gate, f, r, z, first)  # as before
+    gate, asked = run(-4.5, gate)
+    assert asked == {"C"} == _holders(gate)
+
 def test_a_waiter_does_not_yield_to_one_that_waits_for_a_car_at_a_red():
     """The hand-out of :func:`test_a_turning_candidate_lets_a_waiter_beside_its_path_go_first`, with R
     standing at a red on B's lane inside the guard, ahead of B (B's corridor runs into R's box: B
