@@ -104,6 +104,7 @@ def test_every_rule_is_on_the_largest_guard():
     bus = AuthorityReach(hold=0.25, hold_y=0.2, across=1.4, length=12.0, width=2.5, delta=1.0)
     g_bus = 5.0 + 1.4 + 0.5 * np.hypot(12.0, 2.5)
     gate = AuthorityGate([J], {"car": CAR, "bus": bus})
+    gate.trim_corridors = False  # the release alone (A's corridor cut behind it would let B in beside it)
     np.testing.assert_allclose(gate.hi[0], [g_bus, g_bus], rtol=0, atol=1e-12)
     scene = Scene({"A": EAST, "B": NORTH}, k={"A": 15, "B": 15})
     fleet = scene.fleet()
@@ -377,8 +378,10 @@ def test_a_later_waiter_passes_a_blocked_one_only_off_its_path(pass_blocked):
 def test_token_released_when_every_claim_has_left_the_guard():
     """A's stop point is past its exit slot; its claim (from its tail) still reaches 0.2 m into
     the guard: A keeps the token and B waits.  0.2 m out: released, and B gets it in the same
-    round.  A vehicle gone releases its token too."""
+    round.  A vehicle gone releases its token too.  (The release alone: A's corridor cut behind
+    it, next test, would let B in beside it.)"""
     gate = _gate()
+    gate.trim_corridors = False
     assert Scene({"A": EAST, "B": NORTH}, k={"A": ENTRY - 1, "B": ENTRY - 1}).withhold(gate, t=0) == {"A"}
     k_a = EXIT + 4  # x = 15
     for t, (tail, held) in enumerate(((GUARD - 0.2, True), (GUARD + 0.2, False)), start=1):
@@ -389,6 +392,26 @@ def test_token_released_when_every_claim_has_left_the_guard():
     gate = _gate()
     assert Scene({"A": EAST, "B": NORTH}, k={"A": ENTRY - 1, "B": ENTRY - 1}).withhold(gate, t=0) == {"A"}
     assert Scene({"B": NORTH}, k={"B": ENTRY - 1}).withhold(gate, t=1) == {"B"} == _holders(gate)
+
+
+@pytest.mark.parametrize("trim", [True, False])
+def test_a_holders_corridor_is_cut_behind_it(trim):
+    """A took the token at its entry line (its corridor from x = -11 to the exit slot, x = 11, ±2.75 m
+    along); B, north-bound at x = 1.6 (corridor x in [0.5, 2.7]), waits.  A's stop point is at the
+    exit slot, its body still in the guard (A keeps the token).  Its claim's tail at x = 6: the boxes
+    from x = 4 on meet it (4 + 2.75 >= 6), the first reaching back to 1.25 -- still B's corridor: B
+    waits.  Tail at x = 8 (0.19 m inside the guard): the boxes kept start at x = 6 (from 3.25), clear
+    of B's corridor: B takes a token beside A.  Without the cut B waits until A has left the guard."""
+    gate = _gate()
+    gate.trim_corridors = trim
+    assert Scene({"A": EAST, "B": NORTH}, k={"A": ENTRY - 1, "B": ENTRY - 1}).withhold(gate, t=0) == {"A"}
+    for t, tail in enumerate((6.0, 8.0), start=1):
+        assert tail < GUARD
+        claim = ((tail, -1.6 - HOLD[1]), (11.0 + HOLD[0], -1.6 + HOLD[1]))
+        asked = Scene({"A": EAST, "B": NORTH}, k={"A": EXIT, "B": ENTRY - 1}, claims={"A": claim}).withhold(gate, t=t)
+        shared = trim and tail == 8.0
+        assert asked == ({"A", "B"} if shared else {"A"}) and _holders(gate) == asked, (trim, tail)
+    assert (gate.corridors_cut > 0) == trim
 
 
 def test_corridor_runs_from_the_stop_point_to_the_exit_slot_and_is_cached():
