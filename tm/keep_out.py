@@ -39,6 +39,8 @@ class KeepOut:
 
     def __init__(self, classes: Mapping[str, AuthorityReach]):
         self.classes = classes
+        #: over the run: holders let go into each other's paths (:meth:`_mutual`)
+        self.mutual_released = 0
         self.margin = max((c.delta + c.hold + 0.5 * np.hypot(c.length, c.width) for c in classes.values()),
                           default=0.0) + 10.0
 
@@ -112,9 +114,9 @@ class KeepOut:
         at = np.full(len(ids), -1, dtype=np.intp)
         at[every] = np.arange(len(every))
         n_withheld = 0
-        # ... then holder by holder, requests withheld by one holder no longer count for the next
+        by: dict[int, set[int]] = {}  # withheld row -> the holders' rows that withheld it
+        # ... then holder by holder (each withheld request's holders noted, :meth:`_mutual`)
         for hs, row, lo, hi, near in todo:
-            near = near[out[near]]
             if not len(near):
                 continue
             co = set(pos[v] for v in hs if v in pos)
@@ -134,10 +136,32 @@ class KeepOut:
                     continue
                 if hit[1].any() and not hit[0].any():
                     withheld.append(j)
+            for j in withheld:
+                by.setdefault(j, set()).add(row)
             if withheld:
+                n_withheld += int(out[withheld].sum())
                 out[withheld] = False
-                n_withheld += len(withheld)
+        n_withheld -= self._mutual(ids, by, out)
         return out, n_withheld
+
+    def _mutual(self, ids: list, by: dict[int, set[int]], out: np.ndarray) -> int:
+        """Let one of each pair of holders kept out of each other's wide path go: each holds a token
+        of its own zone and its next stop point would stand in the other's path, so each would wait
+        for the other to move first, for good (SUMO's ``fkk_in``: ``1_left.0`` leaving ``gneJ21`` and
+        ``2_right.0`` leaving ``gneJ220``, two junctions 3 m apart whose exits merge).  The one whose
+        id sorts first goes, unless a holder that is not its partner keeps it out too; its current
+        standing box misses the other's path (else it would not have been kept out), so the other
+        can follow once it has moved on.  Returns how many were let go (:attr:`mutual_released`)."""
+        freed = 0
+        for j, hs in by.items():
+            partners = {h for h in hs if j in by.get(h, ())}
+            if not partners or hs - partners or out[j]:
+                continue
+            if all(ids[j] < ids[h] for h in partners):
+                out[j] = True
+                freed += 1
+        self.mutual_released += freed
+        return freed
 
     def standing_boxes(self, fleet: JunctionFleet, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """World boxes ``(lo, hi)`` (n, 2, 2) of ``rows`` standing (padded :meth:`AuthorityReach.hold_box`)

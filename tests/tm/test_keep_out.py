@@ -69,3 +69,38 @@ def test_requesters_beyond_the_margin_are_not_looked_at(margin_cut):
                       lambda f, asks: [PATH if f.ids[row] == "H" else None for row, _, _ in asks],
                       lambda f, row, rows, ahead=0: np.zeros(len(rows), dtype=bool))
     assert n == (0 if margin_cut else 1) and out[1] == margin_cut
+
+
+def _east(k):
+    """A car driving east on y = -1.6 (waypoints 1 m apart from x = -30) at stop point ``k``."""
+    x = np.arange(-30.0, 61.0)
+    return np.column_stack([x, np.full(len(x), -1.6)]), np.zeros(len(x)), k
+
+
+@pytest.mark.parametrize("third", [False, True])
+def test_two_holders_kept_out_of_each_others_path_one_goes(third):
+    """A (north-bound, stop point y = -20) and B (east-bound, x = -20) each hold a token of their own
+    zone; each asks for a stop point whose standing box (-21.25 .. -16.75 along) would enter the
+    other's wide path (from -16.8 on), where each stands now it does not (SUMO's ``fkk_in``:
+    ``1_left.0`` and ``2_right.0`` leaving two junctions 3 m apart whose exits merge, both kept out
+    for good).  A (its id first) goes, B waits for it.  With a third holder C whose path A's request
+    enters too, neither goes (only a pair is let go)."""
+    routes = {"A": _north(10), "B": _east(10), "C": _east(0)}
+    ids = list(routes)
+    boxes = {"A": CAR.hold_half(np.array([np.pi / 2]))[0], "B": CAR.hold_half(np.array([0.0]))[0],
+             "C": CAR.hold_half(np.array([0.0]))[0]}
+    lo = np.array([routes[v][0][routes[v][2]] - boxes[v] for v in ids])
+    hi = np.array([routes[v][0][routes[v][2]] + boxes[v] for v in ids])
+    fleet = JunctionFleet(ids, np.array(["car"] * 3), lo, hi,
+                          (([routes[v][0] for v in ids], [routes[v][1] for v in ids],
+                            np.array([routes[v][2] for v in ids])),))
+    paths = {"A": (np.array([[-16.8, -3.0]]), np.array([[-10.0, 0.0]])),   # across B's lane, ahead of B
+             "B": PATH,                                                   # across A's lane, ahead of A
+             "C": (np.array([[0.0, -16.8]]), np.array([[3.0, -10.0]]))}
+    holders = [{"A": None}, {"B": None}] + ([{"C": None}] if third else [])
+    req = np.array([True, True, False])
+    ko = KeepOut({"car": CAR})
+    out, n = ko.apply(fleet, req, holders, lambda f, asks: [paths[f.ids[row]] for row, _, _ in asks],
+                      lambda f, row, rows, ahead=0: np.zeros(len(rows), dtype=bool))
+    assert out.tolist() == ([False, False, False] if third else [True, False, False])
+    assert n == (2 if third else 1) and ko.mutual_released == (0 if third else 1)
