@@ -955,11 +955,7 @@ def test_a_candidate_whose_corridor_meets_a_car_at_a_red_waits_without_the_token
     further south (hold box up to y = -3.75) C's corridor misses it and C takes the token at once;
     with the rule of :class:`JunctionGate` alone (waypoints in the box) C takes it beside R."""
     def run(r_y, gate=None):
-        gate = gate or _gate()
-        north = ((1.6, r_y - 20.0), (1.6, 60.0))
-        scene = Scene({"C": EAST, "R": north}, k={"C": ENTRY - 1, "R": 20}, idle="R")
-        gate.give_back(["R"])  # R stands at a red (tm.signals)
-        return gate, scene.withhold(gate)
+        return _beside_a_red(EAST, ((1.6, r_y - 20.0), (1.6, 60.0)), gate)
 
     gate, asked = run(-4.5)
     assert asked == set() and _holders(gate) == set() and gate.red_yielded == 1
@@ -970,6 +966,14 @@ def test_a_candidate_whose_corridor_meets_a_car_at_a_red_waits_without_the_token
     gate, asked = run(-4.5, gate)
     assert asked == {"C"} == _holders(gate)
 
+
+def _beside_a_red(c_route, r_route, gate=None):
+    """C at its entry line asks for the token while R, at waypoint 20 of its route, stands at a red
+    (:meth:`JunctionGate.give_back`); the gate (a fresh one unless given) and the requests that stay."""
+    gate = gate or _gate()
+    scene = Scene({"C": c_route, "R": r_route}, k={"C": ENTRY - 1, "R": 20}, idle="R")
+    gate.give_back(["R"])  # R stands at a red (tm.signals)
+    return gate, scene.withhold(gate)
 
 
 def test_a_route_ending_in_the_guard_behind_a_car_at_a_red_waits_without_the_token():
@@ -982,14 +986,13 @@ def test_a_route_ending_in_the_guard_behind_a_car_at_a_red_waits_without_the_tok
     C's hold box there).  C waits (``red_yielded``); with R at x = -1.5 (hold box from -3.75, 0.5 m
     clear of C's corridor box at x = -7, ±2.75 m) C takes the token; with the wide path cut at the
     exit slot as before (none here), C takes it beside R."""
+    c = ((-30.0, -1.6), (-7.0, -1.6))
+    assert len(_route(*c)[0]) == 24
+
     def run(r_x, gate=None):
-        gate = gate or _gate()
-        c = ((-30.0, -1.6), (-7.0, -1.6))
         r = ((r_x - 20.0, -1.6), (r_x + 65.0, -1.6))
-        scene = Scene({"C": c, "R": r}, k={"C": ENTRY - 1, "R": 20}, idle="R")
-        assert np.allclose(scene.routes[1][0][20], (r_x, -1.6)) and len(scene.routes[0][0]) == 24
-        gate.give_back(["R"])  # R stands at a red (tm.signals)
-        return gate, scene.withhold(gate)
+        assert np.allclose(_route(*r)[0][20], (r_x, -1.6))
+        return _beside_a_red(c, r, gate)
 
     gate, asked = run(-4.5)
     assert asked == set() and _holders(gate) == set() and gate.red_yielded == 1
