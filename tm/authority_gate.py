@@ -80,6 +80,9 @@ changes is where they apply:
   the guard of the entry line: a class's own, smaller one released a car's token at the step it
   was handed out (its claim, from where it is to its stop point at the entry line, not yet in the
   car's guard), and the car drove through the zone without one;
+* **corridors cut behind the holder** (:meth:`AuthorityGate._trim`): each step a holder's corridor
+  loses the boxes before the first one its current claim meets, so a crossing stream may take the
+  token once the holder is past the conflict, not only once it has left the guard;
 * **queues** (:meth:`AuthorityGate._follows`): a vehicle on the same lanes behind a holder takes a
   token too when the exit road has room for all of them; and a later waiter passes one that a
   holder blocks when its corridor misses that one's (``pass_blocked``: it cannot delay it).

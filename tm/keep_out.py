@@ -4,7 +4,8 @@ the claims' width").
 
 :class:`KeepOut` withholds the requests whose requested stop point's standing box (the padded
 :meth:`tm.authority_reach.AuthorityReach.hold_box`) meets a holder's wide path from its stop point on
-while the current one does not.  Composed into :class:`tm.authority_gate.AuthorityGate`, which hands
+while the current one does not; of two holders kept out of each other's path so, one goes
+(:meth:`KeepOut._mutual`).  Composed into :class:`tm.authority_gate.AuthorityGate`, which hands
 it the holders and its own path and route helpers.  Liveness only: the traffic manager checks every
 claim.  Pure numpy, no simulator.
 """
