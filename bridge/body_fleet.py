@@ -33,7 +33,7 @@ _SHIFT_GAP_M = 1.0
 #: How many lanes behind its front lane SUMO's back may lie (as :meth:`RouteBody.bodies`).
 _BEHIND_STEPS = 8
 #: The segment quantities :class:`_Ragged` keeps per point when asked to (``per_segment``).
-_SEG_KEYS = ("Dx", "Dy", "Tx", "Ty", "ln2", "sq", "Ux", "Uy")
+_SEG_KEYS = ("Tx", "Ty")
 
 
 def _log2_ceil(k: np.ndarray) -> np.ndarray:
@@ -46,9 +46,10 @@ class _Ragged:
     positions ``G`` (increasing over all), and per polyline ``start``, ``count``, ``base``.
 
     The searches work on x and y arrays (one pass per operation, not (rows, 2) arrays and sums over
-    their short last axis) and take each segment's quantities (:meth:`_segments`: its unit tangent,
-    squared length, ...) by the same operations as :func:`bridge.sumo_body._at` and ``_project``
-    took them per row, so the same floats.  ``per_segment``: computed once for every segment here
+    their short last axis) and take each segment's unit tangent (:meth:`_segments`) by the same
+    operations as :func:`bridge.sumo_body._at` took it per row, so the same floats (the projection,
+    ``_project``'s, is :func:`bridge.body_kernels.nearest_on_segments`).  ``per_segment``: the
+    tangents computed once for every segment here
     (polylines queried many times per point: a route's own :class:`bridge.sumo_body.PadTable`, the
     lanes) instead of per row (a fleet's routes, each queried once a step)."""
 
@@ -70,10 +71,10 @@ class _Ragged:
 
     def _segments(self, i, keys):
         """Per global point index ``i`` (any shape), quantities ``keys`` of its segment: ``Dx, Dy``
-        (to the next point), :meth:`at`'s unit tangent ``Tx, Ty`` (``d / |d|``, ``d`` where ``|d| = 0``),
-        :meth:`nearest`'s squared length ``ln2`` (at least 1e-18), its root ``sq`` and ``Ux, Uy``
-        (``d / sq``); the last point of all: a zero segment, never read."""
-        if self.segs is not None:
+        (to the next point) and :meth:`at`'s unit tangent ``Tx, Ty`` (``d / |d|``, ``d`` where
+        ``|d| = 0``); the last point of all: a zero segment, never read.  (:meth:`nearest_xy`'s
+        projection takes its own in :func:`bridge.body_kernels.nearest_on_segments`.)"""
+        if self.segs is not None and all(k in self.segs for k in keys):
             return [self.segs[k][i] for k in keys]
         j = np.minimum(i + 1, len(self.A) - 1)
         dx, dy = self.Px[j] - self.Px[i], self.Py[j] - self.Py[i]
@@ -82,10 +83,6 @@ class _Ragged:
             n = np.hypot(dx, dy)
             nz = np.where(n > 0, n, 1.0)
             got.update(Tx=dx / nz, Ty=dy / nz)
-        if {"ln2", "sq", "Ux"} & set(keys):
-            got["ln2"] = np.maximum(dx * dx + dy * dy, 1e-18)
-            got["sq"] = sq = np.sqrt(got["ln2"])
-            got.update(Ux=dx / sq, Uy=dy / sq)
         return [got[k] for k in keys]
 
     def search(self, row, s, side: str) -> np.ndarray:

@@ -78,12 +78,23 @@ def test_padding_lookups_equal_the_numpy_code(seed, n, ties):
                           _ref_many(sig, arc_k, ks, box_lo, box_hi, reach_T, half, j0))
 
 
+def _ref_segments(R, i, keys):
+    """``_Ragged._segments`` as it was for the numpy projection: per global point ``i``, ``Dx, Dy``
+    (to the next point), the squared length ``ln2`` (at least 1e-18), its root ``sq`` and ``Ux, Uy``
+    (``d / sq``)."""
+    dx, dy = R._segments(i, ("Dx", "Dy"))
+    ln2 = np.maximum(dx * dx + dy * dy, 1e-18)
+    sq = np.sqrt(ln2)
+    got = dict(Dx=dx, Dy=dy, ln2=ln2, sq=sq, Ux=dx / sq, Uy=dy / sq)
+    return [got[k] for k in keys]
+
+
 def _ref_nearest(R, i0, i1, px, py, nseg):
     """``_Ragged._nearest`` as it was in numpy (the reference), on ragged polylines ``R``."""
     M = int(nseg.max(initial=0))
     if M <= 1:  # one segment each: no search
         J = i0
-        dx, dy, ln2, sq, ux, uy = R._segments(J, ("Dx", "Dy", "ln2", "sq", "Ux", "Uy"))
+        dx, dy, ln2, sq, ux, uy = _ref_segments(R, J, ("Dx", "Dy", "ln2", "sq", "Ux", "Uy"))
         ax, ay = R.Px[J], R.Py[J]
         u = np.clip(((px - ax) * dx + (py - ay) * dy) / ln2, 0.0, 1.0)
         qx, qy = ax + u * dx, ay + u * dy
@@ -91,7 +102,7 @@ def _ref_nearest(R, i0, i1, px, py, nseg):
     J = i0[:, None] + np.arange(M)[None, :]  # (n, M)
     valid = J < (i1 - 1)[:, None]
     J = np.where(valid, J, i0[:, None])
-    dx, dy, ln2 = R._segments(J, ("Dx", "Dy", "ln2"))
+    dx, dy, ln2 = _ref_segments(R, J, ("Dx", "Dy", "ln2"))
     ax, ay = R.Px[J], R.Py[J]
     pxm, pym = px[..., None], py[..., None]  # (..., n, 1) against (n, M)
     u = np.clip(((pxm - ax) * dx + (pym - ay) * dy) / ln2, 0.0, 1.0)
@@ -103,7 +114,7 @@ def _ref_nearest(R, i0, i1, px, py, nseg):
         return np.take_along_axis(np.broadcast_to(a, dist.shape), j, axis=-1)[..., 0]
 
     uj, qxj, qyj, jj = pick(u), pick(qx), pick(qy), pick(J)
-    sq, ux, uy = R._segments(jj, ("sq", "Ux", "Uy"))
+    sq, ux, uy = _ref_segments(R, jj, ("sq", "Ux", "Uy"))
     return R.A[jj] + uj * sq, ux * (py - qyj) - uy * (px - qxj)
 
 
