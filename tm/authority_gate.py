@@ -71,13 +71,13 @@ changes is where they apply:
 * **chained zones** (:meth:`AuthorityGate._wanting`, :meth:`AuthorityGate._hand_out`): where a
   route enters the next zone's guard at or before the exit slot of the one it enters now, it
   cannot stop between them outside both; it asks for both tokens at once and gets both or
-  neither (a token handed out ahead is kept until its claim has reached that guard).  Waiting for
-  the second at its entry line while holding the first, two vehicles crossing such a pair in
+  neither.  Waiting for the second at its entry line while holding the first, two vehicles crossing such a pair in
   opposite directions each held one token and waited for the other's, for good (SUMO's
   ``fkk_in``: ``3_right.0`` and ``1_right.0`` at ``276184048`` and ``gneJ21``, 5 m between the
   guards);
-* **release**: when every ``S_k`` (the bounding box of their union) has left the shared guard --
-  the guard of the entry line: a class's own, smaller one released a car's token at the step it
+* **release** (:meth:`AuthorityGate._release`): once the holder's stop point has reached the exit
+  slot of the interval the token was handed out for, when every ``S_k`` (the bounding box of their
+  union) has left the shared guard -- the guard of the entry line: a class's own, smaller one released a car's token at the step it
   was handed out (its claim, from where it is to its stop point at the entry line, not yet in the
   car's guard), and the car drove through the zone without one;
 * **corridors cut behind the holder** (:meth:`AuthorityGate._trim`): each step a holder's corridor
@@ -211,9 +211,9 @@ class AuthorityGate(JunctionGate):
         #: (:meth:`_follows`; the paths are pieces of the routes, which never change)
         self._lanes: dict = {}
         self._stand_memo: tuple = (None, {})  # (fleet, row -> standing box) (:meth:`_standing`)
-        #: (zone, vehicle): tokens handed out with a chained zone's (:meth:`_wanting`) whose holder's
-        #: claim has not reached the zone's guard yet; kept until it has (:meth:`_release`)
-        self.ahead: set[tuple[int, str]] = set()
+        #: (zone, vehicle) -> the exit slot of the interval the token was handed out for: kept while the
+        #: holder's stop point has not reached it (:meth:`_release`)
+        self.pending: dict[tuple[int, str], int] = {}
         #: over the run: token hand-outs taken back because a zone chained to it could not be handed
         #: out in the same round (:meth:`_hand_out`)
         self.chain_revoked = 0
@@ -364,7 +364,7 @@ class AuthorityGate(JunctionGate):
         """:meth:`JunctionGate._hand_out`, all or none per vehicle: a vehicle that wants several
         tokens this round (chained zones, :meth:`_wanting`) keeps those handed out now only if
         it has every one; else they go back (it keeps its place in the waiting order).  Tokens
-        kept for a zone whose guard its claim has not reached yet are marked :attr:`ahead`."""
+        kept are :attr:`pending` until the holder's stop point reaches the interval's exit slot."""
         ids = fleet.ids
         if self.trim_corridors:
             self._trim(fleet, pos)
@@ -381,11 +381,10 @@ class AuthorityGate(JunctionGate):
             self.chain_revoked += 1
         allowed &= ~back
         kept = new & allowed
-        if kept.any():
-            cur_lo, cur_hi = fleet.claim_lo, fleet.claim_hi
-            for z, r in zip(wz[kept].tolist(), wrow[kept].tolist()):
-                if not self._in_guard(z, cur_lo[r], cur_hi[r]):
-                    self.ahead.add((z, ids[r]))
+        for z, r in zip(wz[kept].tolist(), wrow[kept].tolist()):
+            span = self._span_of(fleet, r, z, fleet.route(r)[2] + 1)
+            if span is not None:
+                self.pending[(z, ids[r])] = span[1]
         return allowed
 
     def _trim(self, fleet: JunctionFleet, pos: dict) -> None:
@@ -422,20 +421,28 @@ class AuthorityGate(JunctionGate):
         """Whether the box ``(lo, hi)`` (2,) meets zone ``z``'s guard (touching counts)."""
         return boxes_meet(lo[None], hi[None], self.lo[z][None], self.hi[z][None])
 
-    def _release(self, pos: dict, cur_lo: np.ndarray, cur_hi: np.ndarray) -> None:
-        """:meth:`JunctionGate._release`, except the tokens :attr:`ahead`: kept until the holder's
-        claim has reached the zone's guard (then released as any other once it has left it), or
-        the holder is gone."""
+    def _release(self, fleet: JunctionFleet, pos: dict) -> None:
+        """:meth:`JunctionGate._release`, except the tokens :attr:`pending`: kept until the holder's
+        stop point has reached the exit slot of the interval the token was handed out for (then
+        released as any other once its claim has left the guard), or the holder is gone.
+
+        Whether a claim meets the guard says nothing of where the holder stands on its route: a
+        claim's box follows the vehicle's speed and heading, and one that had just reached the
+        guard left it again as the vehicle braked into a bend (SUMO's ``fkk_in``, ``3_right.0``
+        between ``276184048`` and ``gneJ21``, 5 m apart: handed both tokens at once, it lost the
+        second 0.2 s after its claim first touched that guard, stood between the zones for good,
+        and ``2_left.0``, the other way, stood beside it waiting for the first).  Without a stop
+        point in the interval, the claim of a vehicle at the entry line (its hold box clear of
+        the guard) gave the token back the step after the hand-out whenever the manager denied
+        the switch, and the vehicle queued again behind every waiter."""
         keep = {}
-        for z, v in list(self.ahead):
+        for (z, v), x in list(self.pending.items()):
             i = pos.get(v, -1)
-            if i < 0 or v not in self.holders[z]:
-                self.ahead.discard((z, v))
-            elif self._in_guard(z, cur_lo[i], cur_hi[i]):
-                self.ahead.discard((z, v))  # in the guard now: released as usual when it leaves
+            if i < 0 or v not in self.holders[z] or fleet.route(i)[2] >= x:
+                del self.pending[(z, v)]
             else:
                 keep[(z, v)] = self.holders[z].pop(v)
-        super()._release(pos, cur_lo, cur_hi)
+        super()._release(fleet, pos)
         for (z, v), c in keep.items():
             self.holders[z][v] = c
 

@@ -296,8 +296,7 @@ class JunctionGate:
                   new_lo: np.ndarray, new_hi: np.ndarray) -> np.ndarray:
         """:meth:`withhold` with ``pos`` (:meth:`_rows_by_id` of ``fleet``) built by the caller, who
         may use it for its own work in the same step (:meth:`tm.authority_gate.AuthorityGate.withhold`)."""
-        cur_lo, cur_hi = fleet.claim_lo, fleet.claim_hi
-        self._release(pos, cur_lo, cur_hi)
+        self._release(fleet, pos)
         req = np.array(requesting, dtype=bool)
         r = np.flatnonzero(req)
         if not len(r):
@@ -461,8 +460,9 @@ class JunctionGate:
         corridor meets a holder's waits for it)."""
         return False
 
-    def _release(self, pos: dict, cur_lo: np.ndarray, cur_hi: np.ndarray) -> None:
+    def _release(self, fleet: JunctionFleet, pos: dict) -> None:
         """Release tokens whose holder's current claim has left the guard (or who is gone)."""
+        cur_lo, cur_hi = fleet.claim_lo, fleet.claim_hi
         held = [(z, pos.get(h, -1), h) for z, hs in enumerate(self.holders) for h in hs]
         if held:
             hz = np.array([z for z, _, _ in held], dtype=np.intp)
