@@ -394,6 +394,28 @@ def test_token_released_when_every_claim_has_left_the_guard():
     assert Scene({"B": NORTH}, k={"B": ENTRY - 1}).withhold(gate, t=1) == {"B"} == _holders(gate)
 
 
+@pytest.mark.parametrize("k_a", [ENTRY - 1, ENTRY + 5, EXIT - 1])
+def test_a_token_is_kept_until_the_stop_point_reaches_the_exit_slot(k_a):
+    """SUMO's ``fkk_in`` (issue 12): ``3_right.0``, handed two chained zones' tokens at once, lost the
+    second 0.2 s after its claim's box first touched that guard, when the box left it again as the
+    vehicle braked into a bend; it stood between the zones for good.  A takes the token at its entry
+    line; at step 1 its stop point is ``k_a`` (still at the entry line, the manager having denied the
+    switch; inside the guard; one short of the exit slot) and its claim's box lies wholly outside the
+    guard: A keeps the token and B, whose corridor crosses A's, waits.  At step 2 A's stop point is at
+    the exit slot and its claim outside the guard: released, and B takes the token.  (Released at
+    step 1 when the claim's box alone decided.)"""
+    gate = _gate()
+    assert Scene({"A": EAST, "B": NORTH}, k={"A": ENTRY - 1, "B": ENTRY - 1}).withhold(gate, t=0) == {"A"}
+    assert gate.pending == {(0, "A"): EXIT}
+    behind = ((-GUARD - 6.0, -1.6 - HOLD[1]), (-GUARD - 0.2, -1.6 + HOLD[1]))
+    beyond = ((GUARD + 0.2, -1.6 - HOLD[1]), (GUARD + 6.0, -1.6 + HOLD[1]))
+    for t, (k, claim, held) in enumerate(((k_a, behind, True), (EXIT, beyond, False)), start=1):
+        scene = Scene({"A": EAST, "B": NORTH}, k={"A": k, "B": ENTRY - 1}, claims={"A": claim})
+        asked = scene.withhold(gate, t=t)
+        assert ("B" in asked) is not held and _holders(gate) == ({"A"} if held else {"B"}), t
+    assert (0, "A") not in gate.pending
+
+
 @pytest.mark.parametrize("trim", [True, False])
 def test_a_holders_corridor_is_cut_behind_it(trim):
     """A took the token at its entry line (its corridor from x = -11 to the exit slot, x = 11, ±2.75 m
