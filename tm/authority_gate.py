@@ -71,7 +71,9 @@ changes is where they apply:
 * **chained zones** (:meth:`AuthorityGate._wanting`, :meth:`AuthorityGate._hand_out`): where a
   route enters the next zone's guard at or before the exit slot of the one it enters now, it
   cannot stop between them outside both; it asks for both tokens at once and gets both or
-  neither.  Waiting for the second at its entry line while holding the first, two vehicles crossing such a pair in
+  neither, and one that a claim in its corridor holds back in one of them takes no token in the
+  other that round (:attr:`JunctionGate.all_or_none`: it took one and gave it back every round, and
+  the next in line for both lost that one to it and gave back the other).  Waiting for the second at its entry line while holding the first, two vehicles crossing such a pair in
   opposite directions each held one token and waited for the other's, for good (SUMO's
   ``fkk_in``: ``3_right.0`` and ``1_right.0`` at ``276184048`` and ``gneJ21``, 5 m between the
   guards);
@@ -160,6 +162,7 @@ class AuthorityGate(JunctionGate):
     """
 
     pass_blocked = True
+    all_or_none = True
     #: cut the holders' corridors behind them each step (:meth:`_trim`)
     trim_corridors = True
     #: steps a holder's stop point must stay put before a candidate whose corridor meets its corridor

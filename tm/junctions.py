@@ -199,6 +199,11 @@ class JunctionGate:
     #: its corridor misses that one's: it cannot delay it then.  Off: the first blocked waiter ends
     #: the round.
     pass_blocked = False
+    #: Whether a vehicle that wants several zones' tokens in one round keeps them only if it gets every
+    #: one (:class:`tm.authority_gate.AuthorityGate`): then one that a claim in its corridor holds
+    #: back in one zone takes no token in another either (it would give it back at once, and might
+    #: have taken it from a waiter that could have used it, every round).
+    all_or_none = False
 
     def __init__(self, zones, classes: dict, through: dict | None = None):
         self.zones = list(zones)
@@ -402,8 +407,11 @@ class JunctionGate:
                 if blocked and not (self.pass_blocked and
                                     not any(self.corridors_meet(key_q, lo_q, hi_q, *b) for b in blocked)):
                     continue
-                if blocked_intr[q]:  # a claim it cannot pass stands in its corridor: it waits for that
-                    continue         # one to move, not for the holders, and holds nobody back
+                # a claim it cannot pass stands in its corridor (through this zone, or through another
+                # it wants this round and must have too: ``all_or_none``): it waits for that one to
+                # move, not for the holders, and holds nobody back
+                if blocked_intr[q] or (self.all_or_none and stuck[q]):
+                    continue
                 meet = [h for h, c in holders.items() if self.corridors_meet(key_q, lo_q, hi_q, *c)
                         and not self._passable(fleet, pos, t, h, row_q, z)]
                 follows = (blocked_exit[q] or meet) and self._follows(fleet, pos, row_q, z, meet)

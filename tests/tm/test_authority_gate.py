@@ -688,6 +688,31 @@ def test_chained_zones_are_taken_together_or_two_vehicles_lock(chain):
         assert held[-1] == {"A": {0}, "B": {1}}  # for good: each waits for the other's token
 
 
+@pytest.mark.parametrize("all_or_none", [True, False])
+def test_a_vehicle_held_back_in_one_chained_zone_takes_no_token_in_the_other(all_or_none):
+    """SUMO's ``fkk_in`` (issue 12): ``4_vertical.0`` waited longest for ``276184048`` and ``gneJ21``,
+    chained; cars standing at a red held it back in ``gneJ21``, yet it took ``276184048``'s token
+    every round and gave it back (all or none), and ``1_right.1``, next in line for both, lost
+    ``276184048`` to it and gave back ``gneJ21``'s: for good.  A (east through J, then J2) waits
+    longest; a standing car I on A's path in J2 holds A back there.  B, straight south
+    through J alone, crosses A's corridor in J (and neither one's path meets the other's standing box
+    or exit slot).  With ``all_or_none`` A takes no token in J and B
+    takes J's; without, A takes J's, B waits behind it, and A gives J's back: nobody moves."""
+    gate = AuthorityGate([J, J2], {"car": CAR})
+    gate.all_or_none = all_or_none
+    routes = {"A": _route((-40.0, -0.8), (60.0, -0.8)), "B": _route(*SOUTH), "I": _route((16.0, -0.8), (60.0, -0.8))}
+    f = Scene({}, routes=routes).fleet()
+    (za, ea, xa, _), (zb, eb, _, _) = gate.intervals(f, 0), gate.intervals(f, 1)
+    assert ea[za == 1][0] <= xa[za == 0][0] and zb.tolist() == [0]  # A: J and J2 chained; B: J only
+    k = {"A": int(ea[za == 0][0]) - 1, "B": int(eb[0]) - 1, "I": 2}  # I at x = 18, in J2's guard
+    gate.wait[(0, "A")] = gate.wait[(1, "A")] = -1  # A has waited longest
+    for t in range(3):
+        asked = Scene({}, k=k, idle="I", routes=routes).withhold(gate, t=t)
+        assert asked == ({"B"} if all_or_none else set()), t
+        assert _holders(gate) == ({"B"} if all_or_none else set()) and not gate.holders[1]
+    assert (gate.chain_revoked == 0) == all_or_none
+
+
 def _stalled_holder_run(h_x: float, stall_steps, steps: int = 12) -> tuple[AuthorityGate, list]:
     """H (truck) takes the token at its entry line on the east arm to turn right into the north arm,
     then stands (not asking) with its stop point at ``x = h_x`` on the east arm, inside the guard;
