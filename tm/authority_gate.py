@@ -99,7 +99,7 @@ from operator import itemgetter
 import numpy as np
 
 from tm.authority_reach import AuthorityReach
-from tm.boxes import boxes_meet, polygon_sets_meet, polygons_meet
+from tm.boxes import boxes_meet, corridor_hits, polygon_sets_meet, polygons_meet
 from tm.junctions import JunctionFleet, JunctionGate
 from tm.keep_out import KeepOut
 from tm.stalls import StallClock
@@ -163,6 +163,9 @@ class AuthorityGate(JunctionGate):
 
     pass_blocked = True
     all_or_none = True
+    #: Judge the intruders of a candidate's corridor on the corridor ahead of it, as oriented boxes
+    #: where world boxes meet (:meth:`_intruder_hits`); off: every corridor box, as world boxes.
+    oriented_intruders = True
     #: cut the holders' corridors behind them each step (:meth:`_trim`)
     trim_corridors = True
     #: steps a holder's stop point must stay put before a candidate whose corridor meets its corridor
@@ -203,6 +206,7 @@ class AuthorityGate(JunctionGate):
         #: over the run: candidates' corridors let past a stalled holder's standing box (:meth:`_passable`)
         self.stalled_passed = 0
         self._wide: dict = {}  # (vehicle, zone, waypoint, first) -> its wide path (:meth:`_wide_path`)
+        self._ahead_poly: dict = {}  # route key -> its corridor ahead as oriented boxes (:meth:`_ahead_polygons`)
         #: (vehicle, zone, waypoint) -> its wide path beyond its stop point as oriented boxes (:meth:`_wide_polygons`)
         self._wide_poly: dict = {}
         #: over the run: token hand-outs deferred because the candidate's wide path meets a vehicle standing
@@ -680,6 +684,56 @@ class AuthorityGate(JunctionGate):
         b_lo, b_hi = np.asarray(box[0])[None], np.asarray(box[1])[None]
         return any(boxes_meet(W[idx] - r, W[idx] + r, b_lo, b_hi)
                    for r in (cls.half_extent(H[idx]), cls.half_extent(H[np.minimum(idx + 1, len(H) - 1)])))
+
+    def _intruder_hits(self, fleet: JunctionFleet, keys: list, zq: np.ndarray, rq: np.ndarray, first: np.ndarray,
+                       c_lo: np.ndarray, c_hi: np.ndarray, zs: np.ndarray, rs: np.ndarray) -> np.ndarray:
+        """:meth:`JunctionGate._intruder_hits` on the corridor ahead of the candidate: without the box
+        at its current waypoint (where there are more), and as oriented boxes, padded by SUMO's body
+        reach (:meth:`AuthorityReach.corridor_polygons`), where a world box meets the claim's.
+
+        The box at the current waypoint reaches ``δ/2 + T^0 + L/2`` behind it, over the front of the
+        vehicle queued right behind (claims no longer reach backwards: the candidate never stands
+        there again), and the next box holds all of it ahead of the waypoint.  World boxes of roads
+        not along an axis overlap lanes side by side.  SUMO's ``fokr_bs_demo``: two cars standing
+        side by side at a red light inside junction ``38`` gave their tokens back; at green each one's
+        corridor met the other's claim box (world boxes at 14 degrees), and one's also met the car
+        queued behind it, for good."""
+        if not self.oriented_intruders:
+            return super()._intruder_hits(fleet, keys, zq, rq, first, c_lo, c_hi, zs, rs)
+        n = np.diff(first)
+        keep = np.ones(len(c_lo), dtype=bool)
+        keep[first[:-1][n > 1]] = False
+        first2 = np.r_[0, np.cumsum(n - (n > 1))]
+        lo2, hi2 = c_lo[keep], c_hi[keep]
+        hits = corridor_hits(zq, rq, first2, lo2, hi2, zs, rs, fleet.claim_lo, fleet.claim_hi)
+        if fleet.claim_polygons is None or not hits.any():
+            return hits
+        cur_lo, cur_hi = fleet.claim_lo, fleet.claim_hi
+        for q in np.flatnonzero(hits).tolist():
+            a, b = int(first2[q]), int(first2[q + 1])
+            js = rs[np.searchsorted(zs, zq[q], "left"):np.searchsorted(zs, zq[q], "right")]
+            js = js[js != rq[q]]
+            near = np.all((lo2[a:b, None] <= cur_hi[js]) & (hi2[a:b, None] >= cur_lo[js]), axis=2).any(axis=0)
+            js = js[near]
+            polys = self._ahead_polygons(fleet, int(rq[q]), keys[q])
+            jp, owner = fleet.claim_polygons(js)
+            hits[q] = any(polygons_meet(polys, jp[owner == i]) for i in range(len(js)))
+        return hits
+
+    def _ahead_polygons(self, fleet: JunctionFleet, row: int, key) -> np.ndarray:
+        """Row ``row``'s corridor (route key ``key``, :meth:`route_through`) without the box at its
+        current waypoint, as oriented boxes padded by SUMO's body reach (cached per key)."""
+        found = self._ahead_poly.get(key)
+        if found is None:
+            W, H, k = fleet.route(row)
+            n = len(self._routes[key][2])
+            idx = np.arange(k + (n > 1), k + n)
+            nxt = np.minimum(idx + 1, len(H) - 1)
+            if len(self._ahead_poly) > 100_000:  # stale keys: start over
+                self._ahead_poly.clear()
+            found = self._ahead_poly[key] = self.classes[fleet.family[row]].corridor_polygons(
+                W[idx], fleet.pad(row, idx), H[idx], H[nxt])
+        return found
 
     def _slot_taken(self, fleet: JunctionFleet, keys: list, rows: np.ndarray) -> np.ndarray:
         """:meth:`JunctionGate._slot_taken` with oriented boxes: an exit slot whose world box meets

@@ -379,8 +379,8 @@ class JunctionGate:
             keep = ~np.isin(gz_ * n + gi_, holder_keys) & self.passes([ids[i] for i in gi_.tolist()], gz_)
             stand = np.array([ids[i] in self.standing for i in gi_.tolist()], dtype=bool).reshape(-1)
             o = np.argsort(gz_[keep & ~stand], kind="stable")
-            blocked_intr = corridor_hits(zP, wrow[P], first, c_lo, c_hi,
-                                         gz_[keep & ~stand][o], gi_[keep & ~stand][o], cur_lo, cur_hi)
+            blocked_intr = self._intruder_hits(fleet, [rt[0] for rt in routes], zP, wrow[P], first, c_lo, c_hi,
+                                               gz_[keep & ~stand][o], gi_[keep & ~stand][o])
             if (keep & stand).any():  # standing at a red: only routes running into its claim
                 o = np.argsort(gz_[keep & stand], kind="stable")
                 blocked_intr |= self._standing_hits(fleet, zP, wrow[P], first, c_lo, c_hi,
@@ -431,6 +431,14 @@ class JunctionGate:
                 if cid[q] in self.given_back:
                     self.given_back[cid[q]].discard(z)
         return allowed
+
+    def _intruder_hits(self, fleet: JunctionFleet, keys: list, zq: np.ndarray, rq: np.ndarray, first: np.ndarray,
+                       c_lo: np.ndarray, c_hi: np.ndarray, zs: np.ndarray, rs: np.ndarray) -> np.ndarray:
+        """Which candidates (zone ``zq``, row ``rq``, route key ``keys[q]``, corridor boxes
+        ``c_lo[first[q]:first[q+1]]``) have a claim in their corridor that is already in the guard
+        and no holder's (rows ``rs`` of zones ``zs``, sorted by zone; :meth:`_hand_out`): here, any
+        claim whose world box meets a corridor box."""
+        return corridor_hits(zq, rq, first, c_lo, c_hi, zs, rs, fleet.claim_lo, fleet.claim_hi)
 
     def _slot_taken(self, fleet: JunctionFleet, keys: list, rows: np.ndarray) -> np.ndarray:
         """Whether each candidate's exit slot (its route key, :meth:`route_through`), whose box meets
