@@ -53,6 +53,10 @@ changes is where they apply:
   with the token it would stand in the zone until the light turns green (SUMO's ``fkk_in``, whose
   lights change only by hand: for good), and such a waiter is no one's reason to yield
   (:meth:`_yields`): it takes no token meanwhile, through this zone or one chained to it;
+* **intruders** (:meth:`AuthorityGate._intruder_hits`): a claim in the guard that is no holder's holds
+  a candidate back only where it meets the candidate's corridor ahead of its stop point (not the box
+  at it, which reaches over the car queued behind), as padded oriented boxes where the world boxes
+  meet (lanes side by side on a road not along an axis);
 * **stalled holders** (:meth:`AuthorityGate._passable`): a holder whose stop point has not moved
   for :attr:`~AuthorityGate.stall_steps` steps holds back a candidate only where the candidate's
   corridor meets its standing box, not its whole corridor, and a waiter held back by stalled

@@ -1115,3 +1115,58 @@ def test_an_exit_slot_on_a_diagonal_road_is_free_beside_the_opposite_lane():
             got = "C" in _holders(gate)
             assert got == (oriented and not taken), (shift, oriented, req)
             assert gate.slots_freed == int(got)
+
+
+def _diagonal(offset: float, deg: float = 30.0):
+    """A straight route through the origin at ``deg`` degrees, ``offset`` m to the left of it, from
+    30 m before the origin to 60 m past it, waypoints 1 m apart."""
+    u = np.array([np.cos(np.deg2rad(deg)), np.sin(np.deg2rad(deg))])
+    o = offset * np.array([-u[1], u[0]])
+    return _route(o - 30.0 * u, o + 60.0 * u)
+
+
+@pytest.mark.parametrize("case", ["behind", "beside"])
+@pytest.mark.parametrize("oriented", [True, False])
+def test_intruders_are_judged_on_the_corridor_ahead_as_oriented_boxes(case, oriented):
+    """SUMO's ``fokr_bs_demo`` (issue 12): two cars standing side by side at a red light inside
+    junction ``38`` had given their tokens back; at green each one's corridor met the other's claim
+    box, world boxes of a road at 14 degrees, and one's also met the front of the car queued right
+    behind it: none of the three moved again.  A stands inside J, its token given back, and asks
+    again; I stands in the guard without a token, idle.  ``behind``: I is queued on A's lane, its
+    front 0.25 m inside the corridor box at A's stop point (which reaches 2.75 m back) and 0.75 m
+    clear of the next one.  ``beside``: A and I stand side by side on a road at 30 degrees, 3.2 m
+    apart: their world boxes meet, their oriented boxes (1.1 m either side of each lane) do not.
+    With :attr:`AuthorityGate.oriented_intruders` A takes the token; without, I holds it back."""
+    gate = _gate()
+    gate.oriented_intruders = oriented
+    if case == "behind":
+        routes = {"A": _route(*EAST), "I": _route(*EAST)}
+        k = {"A": ENTRY + 5, "I": ENTRY}                                  # A at x = -5
+        claims = {"I": ((-12.0, -1.6 - HOLD[1]), (-7.5, -1.6 + HOLD[1]))}  # its front 2.5 m behind A's stop point
+        assert -12.0 < -GUARD  # in the guard
+    else:
+        routes = {"A": _diagonal(-1.6), "I": _diagonal(1.6)}
+        k = {"A": 26, "I": 26}                                           # 4 m before the origin, side by side
+        claims = {}
+    scene = Scene({}, routes=routes, k=k, idle="I", claims=claims)
+    fleet = scene.fleet()
+    lo_a, hi_a = fleet.claim_lo[0], fleet.claim_hi[0]
+    assert np.all(np.abs(lo_a) < GUARD) and np.all(np.abs(hi_a) < GUARD)  # A inside the guard
+
+    def polys(rows, s=scene):
+        P = []
+        for r in rows.tolist():
+            if s.ids[r] in s.claims:
+                (x0, y0), (x1, y1) = s.claims[s.ids[r]]
+                P.append(np.array([[[x0, y0], [x1, y0], [x1, y1], [x0, y1]]], dtype=float))
+            else:
+                W, H = s.routes[r]
+                P.append(CAR.hold_polygons(W[s.k[r]][None], np.zeros((1, 4)), H[s.k[r]:s.k[r] + 1]))
+        return np.concatenate(P), np.repeat(np.arange(len(P)), [len(p) for p in P])
+
+    fleet = replace(fleet, claim_polygons=polys)
+    key, _, c_lo, c_hi = gate.route_through(fleet, 0, 0)
+    assert boxes_meet(c_lo, c_hi, fleet.claim_lo[1:], fleet.claim_hi[1:])  # the whole corridor's world boxes meet I
+    gate.given_back["A"] = {0}
+    asked = gate.withhold(0, fleet, scene.requesting, np.zeros((1, 2)), np.zeros((1, 2)))
+    assert bool(asked[0]) == oriented and ("A" in _holders(gate)) == oriented
