@@ -1117,7 +1117,7 @@ def test_an_exit_slot_on_a_diagonal_road_is_free_beside_the_opposite_lane():
             assert gate.slots_freed == int(got)
 
 
-def _diagonal(offset: float, deg: float = 30.0):
+def _diagonal_at(offset: float, deg: float = 30.0):
     """A straight route through the origin at ``deg`` degrees, ``offset`` m to the left of it, from
     30 m before the origin to 60 m past it, waypoints 1 m apart."""
     u = np.array([np.cos(np.deg2rad(deg)), np.sin(np.deg2rad(deg))])
@@ -1145,7 +1145,7 @@ def test_intruders_are_judged_on_the_corridor_ahead_as_oriented_boxes(case, orie
         claims = {"I": ((-12.0, -1.6 - HOLD[1]), (-7.5, -1.6 + HOLD[1]))}  # its front 2.5 m behind A's stop point
         assert -12.0 < -GUARD  # in the guard
     else:
-        routes = {"A": _diagonal(-1.6), "I": _diagonal(1.6)}
+        routes = {"A": _diagonal_at(-1.6), "I": _diagonal_at(1.6)}
         k = {"A": 26, "I": 26}                                           # 4 m before the origin, side by side
         claims = {}
     scene = Scene({}, routes=routes, k=k, idle="I", claims=claims)
