@@ -77,15 +77,16 @@ changes is where they apply:
   cannot stop between them outside both; it asks for both tokens at once and gets both or
   neither, and one that a claim in its corridor holds back in one of them takes no token in the
   other that round (:attr:`JunctionGate.all_or_none`: it took one and gave it back every round, and
-  the next in line for both lost that one to it and gave back the other).  Waiting for the second at its entry line while holding the first, two vehicles crossing such a pair in
-  opposite directions each held one token and waited for the other's, for good (SUMO's
-  ``fkk_in``: ``3_right.0`` and ``1_right.0`` at ``276184048`` and ``gneJ21``, 5 m between the
-  guards);
+  the next in line for both lost that one to it and gave back the other).  Waiting for the second
+  at its entry line while holding the first, two vehicles crossing such a pair in opposite
+  directions each held one token and waited for the other's, for good (SUMO's ``fkk_in``:
+  ``3_right.0`` and ``1_right.0`` at ``276184048`` and ``gneJ21``, 5 m between the guards);
 * **release** (:meth:`AuthorityGate._release`): once the holder's stop point has reached the exit
   slot of the interval the token was handed out for, when every ``S_k`` (the bounding box of their
-  union) has left the shared guard -- the guard of the entry line: a class's own, smaller one released a car's token at the step it
-  was handed out (its claim, from where it is to its stop point at the entry line, not yet in the
-  car's guard), and the car drove through the zone without one;
+  union) has left the shared guard -- the guard of the entry line: a class's own, smaller one
+  released a car's token at the step it was handed out (its claim, from where it is to its stop
+  point at the entry line, not yet in the car's guard), and the car drove through the zone without
+  one;
 * **corridors cut behind the holder** (:meth:`AuthorityGate._trim`): each step a holder's corridor
   loses the boxes before the first one its current claim meets, so a crossing stream may take the
   token once the holder is past the conflict, not only once it has left the guard;
@@ -427,10 +428,6 @@ class AuthorityGate(JunctionGate):
                     self._corridor_boxes[cut] = np.concatenate([polys[i0:n], polys[n + i0:]])
                 hs[h] = (cut, lo[i0:], hi[i0:])
                 self.corridors_cut += 1
-
-    def _in_guard(self, z: int, lo: np.ndarray, hi: np.ndarray) -> bool:
-        """Whether the box ``(lo, hi)`` (2,) meets zone ``z``'s guard (touching counts)."""
-        return boxes_meet(lo[None], hi[None], self.lo[z][None], self.hi[z][None])
 
     def _release(self, fleet: JunctionFleet, pos: dict) -> None:
         """:meth:`JunctionGate._release`, except the tokens :attr:`pending`: kept until the holder's
