@@ -66,6 +66,20 @@ class Scene:
         h = self.reach[self.family[i]].hold_half(H[self.k[i]:self.k[i] + 1])[0]
         return W[self.k[i]] - h, W[self.k[i]] + h
 
+    def claim_polygons(self, rows):
+        """:attr:`JunctionFleet.claim_polygons` of the scene: each row's claim box (an axis-aligned
+        box, ``claims``) or its hold box at its stop point as an oriented box."""
+        P = []
+        for r in rows.tolist():
+            if self.ids[r] in self.claims:
+                (x0, y0), (x1, y1) = self.claims[self.ids[r]]
+                P.append(np.array([[[x0, y0], [x1, y0], [x1, y1], [x0, y1]]], dtype=float))
+            else:
+                W, H = self.routes[r]
+                P.append(self.reach[self.family[r]].hold_polygons(W[self.k[r]][None], np.zeros((1, 4)),
+                                                                  H[self.k[r]:self.k[r] + 1]))
+        return np.concatenate(P), np.repeat(np.arange(len(P)), [len(p) for p in P])
+
     def fleet(self):
         boxes = [self.claims.get(v) or self.hold_box(i) for i, v in enumerate(self.ids)]
         lo = np.array([b[0] for b in boxes], dtype=float).reshape(-1, 2)
@@ -1106,11 +1120,7 @@ def test_an_exit_slot_on_a_diagonal_road_is_free_beside_the_opposite_lane():
             lo_s, hi_s = W[slot] - half, W[slot] + half
             assert boxes_meet(lo_q[None], hi_q[None], lo_s[None], hi_s[None])  # the world boxes meet
             if oriented:
-                def polys(rows, s=scene):
-                    P = [CAR.hold_polygons(s.routes[r][0][s.k[r]][None], np.zeros((1, 4)),
-                                           s.routes[r][1][s.k[r]:s.k[r] + 1]) for r in rows.tolist()]
-                    return np.concatenate(P), np.repeat(np.arange(len(P)), [len(q) for q in P])
-                fleet = replace(fleet, claim_polygons=polys)
+                fleet = replace(fleet, claim_polygons=scene.claim_polygons)
             req = gate.withhold(0, fleet, scene.requesting, np.zeros((1, 2)), np.zeros((1, 2)))
             got = "C" in _holders(gate)
             assert got == (oriented and not taken), (shift, oriented, req)
@@ -1153,18 +1163,7 @@ def test_intruders_are_judged_on_the_corridor_ahead_as_oriented_boxes(case, orie
     lo_a, hi_a = fleet.claim_lo[0], fleet.claim_hi[0]
     assert np.all(np.abs(lo_a) < GUARD) and np.all(np.abs(hi_a) < GUARD)  # A inside the guard
 
-    def polys(rows, s=scene):
-        P = []
-        for r in rows.tolist():
-            if s.ids[r] in s.claims:
-                (x0, y0), (x1, y1) = s.claims[s.ids[r]]
-                P.append(np.array([[[x0, y0], [x1, y0], [x1, y1], [x0, y1]]], dtype=float))
-            else:
-                W, H = s.routes[r]
-                P.append(CAR.hold_polygons(W[s.k[r]][None], np.zeros((1, 4)), H[s.k[r]:s.k[r] + 1]))
-        return np.concatenate(P), np.repeat(np.arange(len(P)), [len(p) for p in P])
-
-    fleet = replace(fleet, claim_polygons=polys)
+    fleet = replace(fleet, claim_polygons=scene.claim_polygons)
     key, _, c_lo, c_hi = gate.route_through(fleet, 0, 0)
     assert boxes_meet(c_lo, c_hi, fleet.claim_lo[1:], fleet.claim_hi[1:])  # the whole corridor's world boxes meet I
     gate.given_back["A"] = {0}
