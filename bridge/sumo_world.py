@@ -445,7 +445,15 @@ def _pad_key(route, body: RouteBody, arc, W, H, box_lo, box_hi, frame: str) -> t
 
 
 def junction_zones(net_path) -> list[Zone]:
-    """Every junction where two or more edges enter, as a zone (its shape's bounding box)."""
+    """Every junction where two or more edges enter and some of its links conflict, as a zone (its
+    shape's bounding box).
+
+    A junction whose right-of-way matrix lists no foes (every ``<request>``'s ``foes`` all zeros:
+    SUMO found no two of its links crossing or merging, pedestrian crossings included) is no zone:
+    its movements run side by side, and a token would only serialise them.  On SUMO's ``ramp`` the
+    on-ramp's lane joins the motorway at ``gneJ4`` as a lane of its own; as a zone, ramp vehicles
+    waited at its entry line for the right lane's stream to leave the guard, and the right lane for
+    them (README, Known limits).  A junction without a matrix (no ``<request>``) stays a zone."""
     root = parse_xml(net_path).getroot()
     zones = []
     for j in root.iter("junction"):
@@ -454,11 +462,17 @@ def junction_zones(net_path) -> list[Zone]:
         inc = [e for e in (j.get("incLanes") or "").split() if e]
         edges = {lane.rsplit("_", 1)[0] for lane in inc}
         shape = j.get("shape")
-        if len(edges) < 2 or not shape:
+        if len(edges) < 2 or not shape or _conflict_free(j):
             continue
         pts = np.array([[float(c) for c in p.split(",")[:2]] for p in shape.split()])
         zones.append(Zone(j.get("id"), tuple(pts.min(axis=0)), tuple(pts.max(axis=0))))
     return zones
+
+
+def _conflict_free(junction) -> bool:
+    """Whether a ``<junction>`` element's right-of-way matrix has requests and lists no foes."""
+    foes = [r.get("foes") or "" for r in junction.iter("request")]
+    return bool(foes) and not any("1" in f for f in foes)
 
 
 def _classes_for(scenario, demand, classes, source=None):

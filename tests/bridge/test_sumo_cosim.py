@@ -48,6 +48,37 @@ def test_junctions_are_zones(grid_net):
         assert all(lo < hi for lo, hi in zip(z.lo, z.hi))
 
 
+def test_a_junction_whose_links_never_conflict_is_no_zone():
+    """SUMO's ``ramp`` demo, its network unchanged: at ``gneJ4`` the on-ramp's lane joins the motorway as a
+    lane of its own (right-of-way matrix without foes), at ``gneJ14`` two one-lane roads merge into one
+    (foes): only ``gneJ14`` is a zone.  Read from the file, so the check holds for SUMO's own matrix."""
+    import xml.etree.ElementTree as ET
+
+    from sumo_nets.sumo_tools import sumo_home
+
+    net = sumo_home() / "tools" / "game" / "ramp" / "ramp.net.xml"
+    junctions = {j.get("id"): j for j in ET.parse(net).getroot().iter("junction")}
+    foes = lambda name: [r.get("foes") for r in junctions[name].iter("request")]  # noqa: E731
+    assert foes("gneJ4") == ["000", "000", "000"] and "1" in "".join(foes("gneJ14"))  # the premise
+    assert len({lane.rsplit("_", 1)[0] for lane in junctions["gneJ4"].get("incLanes").split()}) == 2
+    assert [z.name for z in junction_zones(net)] == ["gneJ14"]
+
+
+def test_a_junction_without_a_right_of_way_matrix_stays_a_zone(tmp_path):
+    """No ``<request>`` elements (a hand-written or stripped network): nothing says its links never
+    conflict, so it stays a zone; with a matrix that lists a foe it is one too."""
+    def net(requests: str):
+        path = tmp_path / f"n{len(requests)}.net.xml"
+        path.write_text('<net><junction id="J" type="priority" x="0" y="0" incLanes="a_0 b_0" intLanes="" '
+                        f'shape="-5,-5 5,-5 5,5 -5,5">{requests}</junction></net>')
+        return path
+    assert [z.name for z in junction_zones(net(""))] == ["J"]
+    assert [z.name for z in junction_zones(net('<request index="0" response="00" foes="10" cont="0"/>'
+                                               '<request index="1" response="01" foes="01" cont="0"/>'))] == ["J"]
+    assert junction_zones(net('<request index="0" response="00" foes="00" cont="0"/>'
+                              '<request index="1" response="00" foes="00" cont="0"/>')) == []
+
+
 def test_unreadable_net_ends_in_clear_message(grid_routes, tmp_path):
     bad = tmp_path / "broken.net.xml"
     bad.write_text("<net><edge id='a'")  # truncated XML

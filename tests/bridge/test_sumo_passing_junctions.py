@@ -8,11 +8,16 @@ never enters the junction (A10KW, 180 s, diagnostic run at 271b749: at 150 s hal
 both merges and a third of their holders were such passers-by; 35 of 601 arrived).  Now a route
 needs the tokens of the junctions on its edges only (:meth:`bridge.waypoints.NetGeometry.route_junctions`,
 ``through`` of :class:`tm.junctions.JunctionGate`).
+
+Both merges add the ramp's lane beside the motorway's (no foes in SUMO's right-of-way matrix), and such
+junctions are no zones any more (:func:`bridge.sumo_world.junction_zones`); the run below makes every
+junction a zone again, to test ``through`` where it was found.
 """
 
 from pathlib import Path
 from types import SimpleNamespace
 
+from bridge import sumo_world
 from bridge.sumo_world import junction_zones, run_sumo
 from bridge.waypoints import load_net
 from sumo_nets.sumo_tools import sumo_home
@@ -50,7 +55,7 @@ class _Tokens:
             self.route = fleet.route(row)[:2] + (fleet.family[row],)
 
 
-def test_an_east_bound_car_needs_no_token_of_the_west_bound_merge_beside_it(tmp_path):
+def test_an_east_bound_car_needs_no_token_of_the_west_bound_merge_beside_it(tmp_path, monkeypatch):
     """A lone car on the east-bound carriageway's inner lane (``departPos="last"``, ``departSpeed="max"``, as the
     demo's): its route's hold boxes reach the guard of the west-bound merge ``32500343`` (its waypoints
     meet the guard without ``through``), yet it never holds that token; it holds ``21432413``'s, the
@@ -66,6 +71,8 @@ def test_an_east_bound_car_needs_no_token_of_the_west_bound_merge_beside_it(tmp_
                            disturbance="random", solver="exact", baseline=None, gui=False, quiet=True,
                            controller="authority")
     rec = _Tokens()
+    assert not {"21432413", "32500343"} & {zz.name for zz in junction_zones(net)}  # no foes: no zones
+    monkeypatch.setattr(sumo_world, "_conflict_free", lambda junction: False)  # every junction a zone, as before
     s = run_sumo(str(cfg), tmp_path / "m", opts, observers_extra=[rec])
     assert s["complete"] and s["safe"], s.get("error") or s["safety_violations"]
     assert s["collisions_sumo"] == 0
