@@ -11,8 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from controllers.tolerances import SWEEP_MARGIN
-from tm.geometry import intersect_sat
+from controllers.tolerances import GEOMETRY_TOL, SWEEP_MARGIN
+from tm.kernels import sets_meet
 
 __all__ = ["BoxGrid", "GuardIndex", "corridor_hits", "boxes_meet", "polygons_meet", "polygon_sets_meet",
            "ranges"]
@@ -142,29 +142,15 @@ def polygon_sets_meet(P: np.ndarray, p_start: np.ndarray, p_count: np.ndarray, Q
     of ``P[p_start[t]:p_start[t] + p_count[t]]`` meets some of ``Q[q_start[t]:q_start[t] + q_count[t]]``
     (``P`` (p, m, 2), ``Q`` (q, m', 2), counter-clockwise and convex; sets may share polygons).
 
-    Bounding boxes first; then the separating-axis test on one meeting candidate of each pair, and on
-    the rest only for the pairs that one left open (where boxes mostly meet as their bounding boxes
-    do, as on a road grid along the axes, one test a pair decides it)."""
-    p_start, p_count = np.asarray(p_start, dtype=np.intp), np.asarray(p_count, dtype=np.intp)
-    q_start, q_count = np.asarray(q_start, dtype=np.intp), np.asarray(q_count, dtype=np.intp)
-    n = len(p_start)
-    out = np.zeros(n, dtype=bool)
-    combos = p_count * q_count
-    if not combos.any():
-        return out
-    t = np.repeat(np.arange(n), combos)
-    r = ranges(np.zeros(n, dtype=np.intp), combos)       # index of the combination within its pair
-    qc = q_count[t]
-    i, j = p_start[t] + r // qc, q_start[t] + r % qc
-    lo, hi, q_lo, q_hi = P.min(axis=1), P.max(axis=1), Q.min(axis=1), Q.max(axis=1)
-    near = np.all((lo[i] <= q_hi[j]) & (hi[i] >= q_lo[j]), axis=1)
-    t, i, j = t[near], i[near], j[near]
-    if not len(t):
-        return out
-    first = np.flatnonzero(np.r_[True, t[1:] != t[:-1]])  # each pair's first candidate (t is sorted)
-    out[t[first[intersect_sat(P[i[first]], Q[j[first]])]]] = True
-    rest = ~out[t]
-    rest[first] = False
-    if rest.any():
-        out[t[rest][intersect_sat(P[i[rest]], Q[j[rest]])]] = True
-    return out
+    One compiled loop (:func:`tm.kernels.sets_meet`): bounding boxes first, then the separating-axis
+    test, stopping at a pair's first polygons that meet.  (In numpy, gathers of every combination
+    cost ~0.2 ms a call on the gate's few polygons, thousands of calls a step at 1,000 vehicles.)"""
+    p_start = np.ascontiguousarray(p_start, dtype=np.intp).reshape(-1)
+    p_count = np.ascontiguousarray(p_count, dtype=np.intp).reshape(-1)
+    q_start = np.ascontiguousarray(q_start, dtype=np.intp).reshape(-1)
+    q_count = np.ascontiguousarray(q_count, dtype=np.intp).reshape(-1)
+    P, Q = np.asarray(P, dtype=float), np.asarray(Q, dtype=float)
+    if not P.size or not Q.size:
+        return np.zeros(len(p_start), dtype=bool)
+    return sets_meet(np.ascontiguousarray(P), p_start, p_count, np.ascontiguousarray(Q), q_start, q_count,
+                     GEOMETRY_TOL)

@@ -9,8 +9,8 @@ per pair that stops early (measured: ``benchmarks/bench_tm.py``, README).  The c
 evaluates them in one pass, with the slots' world bounding boxes, instead of a dozen passes over
 ``(n, K)`` arrays.
 
-Every kernel performs the same floating-point operations, in the same order, as the numpy code it
-replaces (``tests/tm/test_kernels.py`` compares them bit for bit with those formulas): compiled
+Every kernel (but :func:`sets_meet`, see there) performs the same floating-point operations, in the
+same order, as the numpy code it replaces (``tests/tm/test_kernels.py`` compares them bit for bit with those formulas): compiled
 without ``fastmath``, so no reassociation or fused multiply-add.  Trigonometry stays in numpy (the
 callers pass ``cos``/``sin`` of the headings): the library's and numpy's ``cos`` need not agree in
 the last bit.  ``max``/``min`` below are numpy's ``maximum``/``minimum`` for numbers (the first
@@ -25,7 +25,7 @@ from numba import njit
 
 __all__ = ["timed_pairs_plain", "timed_pairs_tight", "reach_boxes", "grid_pairs", "union_bounds", "slot_bounds", "path_slots",
            "cover_boxes", "cover_frame_bounds", "best_assignments", "stop_closure", "min_labels",
-           "greedy_tables", "greedy_stops", "merge_rows"]
+           "greedy_tables", "greedy_stops", "merge_rows", "sets_meet"]
 
 
 @njit(cache=True, inline="always")
@@ -687,3 +687,54 @@ def merge_rows(cur_lo, cur_hi, new_lo, new_hi, src):
                 lo[v, k, 0], lo[v, k, 1] = cur_lo[v, k, 0], cur_lo[v, k, 1]
                 hi[v, k, 0], hi[v, k, 1] = cur_hi[v, k, 0], cur_hi[v, k, 1]
     return lo, hi
+
+
+@njit(cache=True, inline="always")
+def _apart(A, a, B, b, tol):
+    """Whether some edge of polygon ``A[a]`` has polygon ``B[b]`` beyond its support by more than
+    ``tol`` (:func:`tm.geometry._separated`, one direction: unit outward edge normals of a CCW
+    polygon, zero for a zero-length edge)."""
+    k, m = A.shape[1], B.shape[1]
+    for e in range(k):
+        f = e + 1 if e + 1 < k else 0
+        ex, ey = A[a, f, 0] - A[a, e, 0], A[a, f, 1] - A[a, e, 1]
+        norm = np.hypot(ex, ey)
+        inv = 1.0 / norm if norm > 0 else 0.0
+        nx, ny = ey * inv, -ex * inv
+        h = -np.inf
+        for v in range(k):
+            h = max(h, nx * A[a, v, 0] + ny * A[a, v, 1])
+        g = np.inf
+        for v in range(m):
+            g = min(g, nx * B[b, v, 0] + ny * B[b, v, 1])
+        if g - h > tol:
+            return True
+    return False
+
+
+@njit(cache=True)
+def sets_meet(P, p_start, p_count, Q, q_start, q_count, tol):
+    """Per pair ``t``: whether some polygon of ``P[p_start[t]:+p_count[t]]`` meets some of
+    ``Q[q_start[t]:+q_count[t]]`` (:func:`tm.boxes.polygon_sets_meet`): bounding boxes first,
+    then the separating-axis test both ways, stopping at the first pair of polygons that meets.
+
+    Not float for float the numpy test: its projections are ``N @ Q.T`` (a BLAS product, which
+    may fuse a multiply and an add), here ``n_x q_x + n_y q_y``; the two differ only where a gap
+    lies within a rounding of ``tol``, and the gate that asks decides liveness, not safety (the
+    traffic manager checks every request).  ``tests/tm/test_boxes.py`` compares them."""
+    n = len(p_start)
+    out = np.zeros(n, dtype=np.bool_)
+    for t in range(n):
+        for i in range(p_start[t], p_start[t] + p_count[t]):
+            plx, ply = P[i, :, 0].min(), P[i, :, 1].min()
+            phx, phy = P[i, :, 0].max(), P[i, :, 1].max()
+            for j in range(q_start[t], q_start[t] + q_count[t]):
+                if not (plx <= Q[j, :, 0].max() and phx >= Q[j, :, 0].min() and
+                        ply <= Q[j, :, 1].max() and phy >= Q[j, :, 1].min()):
+                    continue
+                if not _apart(P, i, Q, j, tol) and not _apart(Q, j, P, i, tol):
+                    out[t] = True
+                    break
+            if out[t]:
+                break
+    return out

@@ -118,3 +118,30 @@ def test_polygon_sets_meet_is_polygons_meet_of_each_pair(seed, n):
     rev = np.arange(n)[::-1]
     got = polygon_sets_meet(P, np.cumsum(cp) - cp, cp, Q, (np.cumsum(cq) - cq)[rev], cq[rev])
     assert got.tolist() == [dense(P[p_of == t], Q[q_of == rev[t]]) for t in range(n)]
+
+
+def test_polygon_sets_meet_counts_touching_and_not_a_gap_beyond_the_tolerance():
+    """Two unit squares side by side: touching counts (gap 0), 10 tolerances apart they do not meet.
+    Rotated by 30 degrees about the same point, where their bounding boxes overlap and the
+    separating-axis test decides, a gap of half the tolerance counts as touching too.  (Along an
+    axis the bounding boxes are compared exactly, as before the compiled loop: a gap in ``(0, tol]``
+    there does not meet.)  The compiled loop and the numpy separating-axis test agree wherever the
+    boxes meet."""
+    from controllers.tolerances import GEOMETRY_TOL
+    from tm.boxes import polygon_sets_meet
+    from tm.geometry import intersect_sat
+
+    square = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+    c, s = np.cos(np.pi / 6), np.sin(np.pi / 6)
+    rot = np.array([[c, -s], [s, c]])
+    cases = [(np.eye(2), 0.0, True), (np.eye(2), 10 * GEOMETRY_TOL, False), (np.eye(2), 0.5, False),
+             (rot, 0.0, True), (rot, 0.5 * GEOMETRY_TOL, True), (rot, 10 * GEOMETRY_TOL, False), (rot, 0.5, False)]
+    for turn, gap, meets in cases:
+        P = (square @ turn.T)[None]
+        Q = ((square + [1.0 + gap, 0.0]) @ turn.T)[None]
+        got = polygon_sets_meet(P, [0], [1], Q, [0], [1])
+        assert got.tolist() == [meets] == intersect_sat(P, Q).tolist(), (gap, turn)
+    # empty sets meet nothing; a pair whose sets are empty among others is False
+    P = square[None]
+    assert polygon_sets_meet(P, [0, 0], [1, 0], P, [0, 0], [1, 1]).tolist() == [True, False]
+    assert polygon_sets_meet(np.zeros((0, 4, 2)), [0], [0], P, [0], [1]).tolist() == [False]
