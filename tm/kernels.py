@@ -11,11 +11,11 @@ evaluates them in one pass, with the slots' world bounding boxes, instead of a d
 
 Every kernel (but :func:`sets_meet`, see there) performs the same floating-point operations, in the
 same order, as the numpy code it replaces (``tests/tm/test_kernels.py`` compares them bit for bit
-with those formulas): compiled without ``fastmath``, so no reassociation or fused multiply-add.  Trigonometry stays in numpy (the
-callers pass ``cos``/``sin`` of the headings): the library's and numpy's ``cos`` need not agree in
-the last bit.  ``max``/``min`` below are numpy's ``maximum``/``minimum`` for numbers (the first
-argument on ties, as numpy).  Compiled on first use and cached beside this file
-(``cache=True``).
+with those formulas): compiled without ``fastmath``, so no reassociation or fused multiply-add.
+Trigonometry stays in numpy (the callers pass ``cos``/``sin`` of the headings): the library's and
+numpy's ``cos`` need not agree in the last bit. ``max``/``min`` below are numpy's
+``maximum``/``minimum`` for numbers (the first argument on ties, as numpy). Compiled on first use
+and cached beside this file (``cache=True``).
 """
 
 from __future__ import annotations
