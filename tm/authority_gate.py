@@ -99,12 +99,11 @@ Pure numpy, no simulator; safety stays with the traffic manager, which checks ev
 
 from __future__ import annotations
 
-from operator import itemgetter
-
 import numpy as np
 
 from tm.authority_reach import AuthorityReach
 from tm.boxes import boxes_meet, corridor_hits, polygon_sets_meet, polygons_meet
+from tm.guard_spans import GuardSpans
 from tm.junctions import JunctionFleet, JunctionGate
 from tm.keep_out import KeepOut
 from tm.stalls import StallClock
@@ -112,41 +111,6 @@ from tm.stalls import StallClock
 __all__ = ["AuthorityReach", "AuthorityGate"]  # AuthorityReach: re-exported from tm.authority_reach
 
 _UNSET = object()  # not kept yet (:meth:`AuthorityGate._wide_paths`; None is a kept answer)
-
-
-class _FlatIntervals:
-    """Every vehicle's guard intervals (:meth:`AuthorityGate.intervals`: zone, entry, exit slot) in one
-    flat int array, each vehicle's a contiguous run, so that a step's requesters' intervals are
-    gathered by index (a list and three concatenations of a few thousand small arrays took ~2 ms a
-    step at 1,000 vehicles).  A route's intervals never change; a vehicle's run is added when first
-    asked for and the whole is dropped with the gate's other per-vehicle caches."""
-
-    def __init__(self):
-        self.where: dict[str, tuple[int, int]] = {}  # vehicle id -> (first, count)
-        self.table = np.zeros((3, 256), dtype=np.intp)
-        self.used = 0
-
-    def gather(self, fleet: JunctionFleet, rows: np.ndarray, intervals) -> tuple[np.ndarray, np.ndarray]:
-        """``(count (R,), (zone, entry, exit) (3, sum count))`` of fleet ``rows``, in their order;
-        ``intervals(fleet, row)`` gives a vehicle's when first asked."""
-        ids, where = fleet.ids, self.where
-        rl = rows.tolist()
-        for i in rl:
-            if ids[i] not in where:
-                zs, e, x, _ = intervals(fleet, i)
-                m = len(zs)
-                if self.used + m > self.table.shape[1]:
-                    grown = np.zeros((3, 2 * (self.used + m)), dtype=np.intp)
-                    grown[:, :self.used] = self.table[:, :self.used]
-                    self.table = grown
-                self.table[:, self.used:self.used + m] = (zs, e, x)
-                where[ids[i]] = (self.used, m)
-                self.used += m
-        se = np.array([where[ids[i]] for i in rl], dtype=np.intp).reshape(-1, 2)
-        cnt = se[:, 1]
-        tot = int(cnt.sum())
-        pos = np.repeat(se[:, 0] - (np.cumsum(cnt) - cnt), cnt) + np.arange(tot)
-        return cnt, self.table[:, pos]
 
 
 class AuthorityGate(JunctionGate):
@@ -187,12 +151,8 @@ class AuthorityGate(JunctionGate):
 
     def __init__(self, zones, classes: dict, through: dict | None = None):
         super().__init__(zones, classes, through)
-        #: vehicle id -> its route's intervals through the guards (:meth:`intervals`)
-        self._spans: dict[str, tuple] = {}
-        self._span_runs: dict[str, list] = {}  # vehicle id -> its intervals as tuples (:meth:`_span_of`)
-        #: vehicle id -> its intervals ``(entry, zone, exit)`` sorted by entry (:meth:`_wanting`'s chains)
-        self._entry_runs: dict[str, list] = {}
-        self._flat = _FlatIntervals()  # every vehicle's intervals in flat arrays (:meth:`_wanting`)
+        #: every vehicle's route intervals through the guards (cached per vehicle)
+        self.spans = GuardSpans(self.guards, self.classes, self.through, self.passes)
         #: route key -> the corridor's oriented boxes (:meth:`route_through`, :meth:`corridors_meet`)
         self._corridor_boxes: dict = {}
         self._meet_oriented: dict = {}  # (key, key) -> whether the oriented boxes meet
@@ -238,54 +198,12 @@ class AuthorityGate(JunctionGate):
         return max((c.guard_reach for c in classes), default=0.0)
 
     def intervals(self, fleet: JunctionFleet, row: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """``(zone, entry, exit, exits)``: the runs of waypoints of row ``row``'s route whose hold
-        box (``T^0 ⊕ footprint`` at the arriving and leaving headings) meets a zone's shared guard
-        (the largest class's: no holder's claims stick out of the zone further, module notes).
-
-        ``entry`` is the first waypoint of a run (the stop point may move there only with the
-        zone's token), ``exit`` the first after it whose hold box misses the guard (the exit
-        slot), or the last waypoint when the route ends inside the guard (``exits`` False).
-        Cached per vehicle: they depend on its route only."""
-        vid = fleet.ids[row]
-        found = self._spans.get(vid)
-        if found is not None:
-            return found
-        W, H, _ = fleet.route(row)
-        i, z = self._guard_hits(W, H, fleet.family[row], vid)
-        o = np.lexsort((i, z))
-        i, z = i[o], z[o]
-        run = np.r_[True, (z[1:] != z[:-1]) | (i[1:] != i[:-1] + 1)] if len(i) else np.zeros(0, dtype=bool)
-        starts = np.flatnonzero(run)
-        last = i[np.r_[starts[1:], len(i)] - 1] if len(i) else np.zeros(0, dtype=np.intp)
-        exits = last + 1 < len(W)
-        found = self._spans[vid] = (z[starts], i[starts], np.where(exits, last + 1, len(W) - 1), exits)
-        return found
-
-    def _guard_hits(self, W: np.ndarray, H: np.ndarray, vclass: str,
-                    vid: str | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """``(waypoint, zone)`` pairs of a route ``W`` (headings ``H``) whose hold box (``T^0 ⊕
-        footprint`` at the arriving and leaving headings) meets a zone's shared guard (the largest
-        class's: no holder's claims stick out of the zone further, module notes); with vehicle id
-        ``vid``, only the zones its route passes through (:attr:`through`)."""
-        half = self.classes[vclass].hold_half(H, np.r_[H[1:], H[-1:]])
-        i, z = self.guards.pairs(W - half, W + half)
-        if vid is not None and vid in self.through:
-            on = self.passes([vid] * len(z), z)
-            i, z = i[on], z[on]
-        return i, z
+        """Row ``row``'s route intervals through the guards (:meth:`tm.guard_spans.GuardSpans.intervals`)."""
+        return self.spans.intervals(fleet, row)
 
     def entry_limit(self, W: np.ndarray, H: np.ndarray, vclass: str, vid: str | None = None) -> int:
-        """The last waypoint of a route ``W`` (headings ``H``: of the segments arriving at each) before
-        the first of its guard intervals (:meth:`intervals`) that starts after its first waypoint: the
-        furthest stop point a vehicle entering on it may have without a token (bridge/departure.py);
-        its last waypoint when there is none.  ``vid``: the vehicle's id (only the zones its route
-        passes through count, :attr:`through`)."""
-        W, H = np.asarray(W, dtype=float), np.asarray(H, dtype=float)
-        i, _ = self._guard_hits(W, H, vclass, vid)
-        inside = np.zeros(len(W), dtype=bool)
-        inside[i] = True
-        entries = np.flatnonzero(inside[1:] & ~inside[:-1]) + 1  # runs starting after waypoint 0
-        return int(entries[0]) - 1 if len(entries) else len(W) - 1
+        """The furthest stop point without a token on a route (:meth:`tm.guard_spans.GuardSpans.entry_limit`)."""
+        return self.spans.entry_limit(W, H, vclass, vid)
 
     def stop_limit(self, fleet: JunctionFleet, row: int) -> int:
         """The furthest waypoint row ``row``'s stop point may reach without a zone token it does not
@@ -301,20 +219,6 @@ class AuthorityGate(JunctionGate):
                 limit = min(limit, en - 1)
         return limit
 
-    def _span_of(self, fleet: JunctionFleet, row: int, z: int, target: int):
-        """``(entry, exit, exits)`` of zone ``z``'s first interval not left before waypoint
-        ``target`` (the one holding it, or the next one: a chained zone's, :meth:`_wanting`), or
-        None."""
-        vid = fleet.ids[row]
-        runs = self._span_runs.get(vid)
-        if runs is None:  # the intervals as Python tuples: a few per route, asked for thousands of times a step
-            zs, e, x, ex = self.intervals(fleet, row)
-            runs = self._span_runs[vid] = list(zip(zs.tolist(), e.tolist(), x.tolist(), ex.tolist()))
-        for zz, en, xx, exits in runs:
-            if zz == z and target <= xx:
-                return en, xx, bool(exits)
-        return None
-
     def _wanting(self, fleet: JunctionFleet, r: np.ndarray, new_lo: np.ndarray,
                  new_hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(zone, row)`` pairs of requesters ``r`` that need the zone's token unless they hold it,
@@ -322,13 +226,8 @@ class AuthorityGate(JunctionGate):
         zone's intervals (entry to exit slot) and the current one does not, or the vehicle gave
         the zone's token back (:meth:`give_back`)."""
         ids = fleet.ids
-        if len(self._spans) > 4 * len(ids) + 1000:  # vehicles gone: drop their routes
-            live = set(ids)
-            self._spans = {v: sp for v, sp in self._spans.items() if v in live}
-            self._span_runs = {v: sp for v, sp in self._span_runs.items() if v in live}
-            self._entry_runs = {v: sp for v, sp in self._entry_runs.items() if v in live}
-            self._flat = _FlatIntervals()
-        cnt, (z, e, x) = self._flat.gather(fleet, r, self.intervals)
+        self.spans.prune(ids)
+        cnt, (z, e, x) = self.spans.gather(fleet, r)
         if not cnt.sum():
             return np.zeros(0, dtype=np.intp), np.zeros(0, dtype=np.intp)
         row = np.repeat(r, cnt)
@@ -348,13 +247,8 @@ class AuthorityGate(JunctionGate):
             for f, n_i, rw, ef, xf in zip(chained.tolist(), owner[chained].tolist(), row[chained].tolist(),
                                           e[chained].tolist(), x[chained].tolist()):
                 held = ids[rw]
-                runs = self._entry_runs.get(held)
-                if runs is None:  # its intervals (entry, zone, exit) in the route's order, kept as :meth:`intervals`
-                    sp = self.intervals(fleet, rw)
-                    runs = self._entry_runs[held] = sorted(zip(sp[1].tolist(), sp[0].tolist(), sp[2].tolist()),
-                                                           key=itemgetter(0))
                 reach = xf
-                for ej, zj, xj in runs:
+                for ej, zj, xj in self.spans.entry_runs(fleet, rw):
                     if ej <= ef:  # the intervals that begin after this one, in order
                         continue
                     if ej > reach:
@@ -394,7 +288,7 @@ class AuthorityGate(JunctionGate):
         allowed &= ~back
         kept = new & allowed
         for z, r in zip(wz[kept].tolist(), wrow[kept].tolist()):
-            span = self._span_of(fleet, r, z, fleet.route(r)[2] + 1)
+            span = self.spans.span_of(fleet, r, z, fleet.route(r)[2] + 1)
             if span is not None:
                 self.pending[(z, ids[r])] = span[1]
         return allowed
@@ -464,7 +358,7 @@ class AuthorityGate(JunctionGate):
         Then none of them can stop inside the guard: nobody else enters that road but through this
         zone's exit slot, which every other candidate's corridor meets."""
         W, H, k = fleet.route(row)
-        span = self._span_of(fleet, row, z, k + 1)
+        span = self.spans.span_of(fleet, row, z, k + 1)
         if span is None or not span[2]:
             return False
         cls = self.classes[fleet.family[row]]
@@ -478,7 +372,7 @@ class AuthorityGate(JunctionGate):
             if j is None:
                 return False
             Wj, _, kj = fleet.route(j)
-            sj = self._span_of(fleet, j, z, kj + 1) or self._span_of(fleet, j, z, kj)  # as :meth:`_path`
+            sj = self.spans.span_of(fleet, j, z, kj + 1) or self.spans.span_of(fleet, j, z, kj)  # as :meth:`_path`
             if sj is None or sj[1] < sj[0]:
                 return False
             key = (fleet.ids[row], span[0], span[1], h, sj[0], sj[1])  # both paths: routes only
@@ -518,7 +412,7 @@ class AuthorityGate(JunctionGate):
         from there (``to_end``: then to the route's last waypoint, in the guard) or the stop point is
         past the slot."""
         k = fleet.route(row)[2]
-        span = self._span_of(fleet, row, z, k + 1) or self._span_of(fleet, row, z, k)
+        span = self.spans.span_of(fleet, row, z, k + 1) or self.spans.span_of(fleet, row, z, k)
         if span is None or not (span[2] or to_end) or first > span[1]:
             return None
         return np.arange(max(first, 0), span[1] + 1)
@@ -850,7 +744,7 @@ class AuthorityGate(JunctionGate):
         if found is not None:
             return found
         cls = self.classes[fleet.family[row]]
-        span = self._span_of(fleet, row, z, k + 1)
+        span = self.spans.span_of(fleet, row, z, k + 1)
         last, exits = (span[1], span[2]) if span is not None else (min(k + 1, len(W) - 1), False)
         idx = np.arange(k, last + 1)
         nxt = np.minimum(idx + 1, len(H) - 1)

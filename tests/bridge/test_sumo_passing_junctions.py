@@ -78,7 +78,7 @@ def test_an_east_bound_car_needs_no_token_of_the_west_bound_merge_beside_it(tmp_
     assert s["collisions_sumo"] == 0
     gate = rec.gate
     z = [zz.name for zz in gate.zones].index("32500343")
-    _, zs = gate._guard_hits(*rec.route)  # every zone its route reaches (no ``through``): 32500343 among them
+    _, zs = gate.spans.guard_hits(*rec.route)  # every zone its route reaches (no ``through``): 32500343 among them
     assert z in zs.tolist()
     assert ("21432413", "e") in rec.held and ("32500343", "e") not in rec.held
     assert {zz.name for zz in junction_zones(net)} >= {"21432413", "32500343"}
