@@ -103,15 +103,13 @@ import numpy as np
 
 from tm.authority_reach import AuthorityReach
 from tm.boxes import boxes_meet, corridor_hits, polygon_sets_meet, polygons_meet
+from tm.gate_paths import GatePaths
 from tm.guard_spans import GuardSpans
 from tm.junctions import JunctionFleet, JunctionGate
 from tm.keep_out import KeepOut
 from tm.stalls import StallClock
 
 __all__ = ["AuthorityReach", "AuthorityGate"]  # AuthorityReach: re-exported from tm.authority_reach
-
-_UNSET = object()  # not kept yet (:meth:`AuthorityGate._wide_paths`; None is a kept answer)
-
 
 class AuthorityGate(JunctionGate):
     """:class:`tm.junctions.JunctionGate` with the movement-authority rules (module notes).
@@ -153,6 +151,8 @@ class AuthorityGate(JunctionGate):
         super().__init__(zones, classes, through)
         #: every vehicle's route intervals through the guards (cached per vehicle)
         self.spans = GuardSpans(self.guards, self.classes, self.through, self.passes)
+        #: their wide paths through the zones and standing boxes (cached)
+        self.paths = GatePaths(self.classes, self.spans)
         #: route key -> the corridor's oriented boxes (:meth:`route_through`, :meth:`corridors_meet`)
         self._corridor_boxes: dict = {}
         self._meet_oriented: dict = {}  # (key, key) -> whether the oriented boxes meet
@@ -170,10 +170,7 @@ class AuthorityGate(JunctionGate):
         self._still = StallClock()
         #: over the run: candidates' corridors let past a stalled holder's standing box (:meth:`_passable`)
         self.stalled_passed = 0
-        self._wide: dict = {}  # (vehicle, zone, waypoint, first) -> its wide path (:meth:`_wide_path`)
         self._ahead_poly: dict = {}  # route key -> its corridor ahead as oriented boxes (:meth:`_ahead_polygons`)
-        #: (vehicle, zone, waypoint) -> its wide path beyond its stop point as oriented boxes (:meth:`_wide_polygons`)
-        self._wide_poly: dict = {}
         #: over the run: token hand-outs deferred because the candidate's wide path meets a vehicle standing
         #: at a red in the guard (:meth:`_standing_hits`)
         self.red_yielded = 0
@@ -182,7 +179,6 @@ class AuthorityGate(JunctionGate):
         #: (vehicle, its path's entry and exit slot, leader, the leader's) -> whether they are the same lanes
         #: (:meth:`_follows`; the paths are pieces of the routes, which never change)
         self._lanes: dict = {}
-        self._stand_memo: tuple = (None, {})  # (fleet, row -> standing box) (:meth:`_standing`)
         #: (zone, vehicle) -> the exit slot of the interval the token was handed out for: kept while the
         #: holder's stop point has not reached it (:meth:`_release`)
         self.pending: dict[tuple[int, str], int] = {}
@@ -397,91 +393,9 @@ class AuthorityGate(JunctionGate):
         return not np.any(np.all((lo[:, None, :] <= c_hi[None]) & (hi[:, None, :] >= c_lo[None]), axis=2))
 
     # ------------------------------------------------------------------ the moving claims' width
-    def _wide_path(self, fleet: JunctionFleet, row: int, z: int, first: int):
-        """Boxes ``(lo, hi)`` (m, 2) that hold every claim of row ``row`` while its stop point moves
-        from waypoint ``first`` to zone ``z``'s exit slot and rests there: at each of those waypoints
-        :meth:`AuthorityReach.claim_box` (``T^0`` plus ``L/2`` along, the claims' across half-width
-        plus ``W/2`` across, the route's padding there).  None when the route does not leave the
-        guard from there (it arrives inside) or the stop point is past the slot."""
-        return self._wide_paths(fleet, [(row, z, first)])[0]
-
-    def _path_idx(self, fleet: JunctionFleet, row: int, z: int, first: int,
-                  to_end: bool = False) -> np.ndarray | None:
-        """The waypoints of row ``row``'s path through zone ``z`` from waypoint ``first`` to the exit
-        slot (:meth:`_wide_path`, :meth:`_wide_polygons`); None when the route does not leave the guard
-        from there (``to_end``: then to the route's last waypoint, in the guard) or the stop point is
-        past the slot."""
-        k = fleet.route(row)[2]
-        span = self.spans.span_of(fleet, row, z, k + 1) or self.spans.span_of(fleet, row, z, k)
-        if span is None or not (span[2] or to_end) or first > span[1]:
-            return None
-        return np.arange(max(first, 0), span[1] + 1)
-
-    def _wide_paths(self, fleet: JunctionFleet, asks: list) -> list:
-        """:meth:`_wide_path` of each ``(row, z, first)`` of ``asks``, kept per (vehicle, zone, stop
-        point, first); those not kept yet computed together (their boxes one class at a time)."""
-        if len(self._wide) > 100_000:  # stale keys: start over
-            self._wide.clear()
-        out, todo = [], []
-        for row, z, first in asks:
-            W, H, k = fleet.route(row)
-            key = (fleet.ids[row], z, k, first)
-            found = self._wide.get(key, _UNSET)
-            if found is _UNSET:
-                idx = self._path_idx(fleet, row, z, first)
-                if idx is None:
-                    found = self._wide[key] = None
-                else:
-                    todo.append((len(out), key, row, W, H, idx))
-            out.append(found)
-        for c in sorted({fleet.family[t[2]] for t in todo}):
-            mine = [t for t in todo if fleet.family[t[2]] == c]
-            pad = fleet.pad_rows(np.concatenate([np.full(len(idx), row) for _, _, row, _, _, idx in mine]),
-                                 np.concatenate([idx for *_, idx in mine]))  # one lookup for all
-            lo, hi = self.classes[c].claim_box(
-                pad, np.concatenate([H[idx] for *_, H, idx in mine]),
-                np.concatenate([H[np.minimum(idx + 1, len(H) - 1)] for *_, H, idx in mine]))
-            o = 0
-            for n, key, _, W, _, idx in mine:
-                m = len(idx)
-                out[n] = self._wide[key] = (W[idx] + lo[o:o + m], W[idx] + hi[o:o + m])
-                o += m
-        return out
-
-    def _standing(self, fleet: JunctionFleet, row: int) -> tuple[np.ndarray, np.ndarray]:
-        """World box ``(lo, hi)`` (2,) of row ``row`` at rest at its stop point (padded hold box);
-        kept for the fleet it was asked for (a step's rounds ask for the same waiters often)."""
-        memo = self._stand_memo
-        if memo[0] is not fleet:
-            memo = self._stand_memo = (fleet, {})
-        got = memo[1].get(row)
-        if got is None:
-            got = memo[1][row] = self._standing_box(fleet, row)
-        return got
-
-    def _at_stop(self, fleet: JunctionFleet, row: int) -> tuple:
-        """Row ``row``'s class, stop point ``W[k]`` (1, 2), padding there (1, 4) and the stop point's
-        arriving and leaving headings (1,) each: what its hold box at rest is drawn from."""
-        W, H, k = fleet.route(row)
-        idx = np.array([k])
-        return (self.classes[fleet.family[row]], W[idx], fleet.pad(row, idx), H[idx],
-                H[np.minimum(idx + 1, len(H) - 1)])
-
-    def _standing_box(self, fleet: JunctionFleet, row: int) -> tuple[np.ndarray, np.ndarray]:
-        cls, w, pad, h_in, h_out = self._at_stop(fleet, row)
-        lo, hi = cls.hold_box(pad, h_in, h_out)
-        return w[0] + lo[0], w[0] + hi[0]
-
-    def _beyond_meets(self, fleet: JunctionFleet, row: int, z: int, box) -> bool:
-        """Whether row ``row``'s wide path through zone ``z`` beyond its stop point meets ``box``."""
-        path = self._wide_path(fleet, row, z, fleet.route(row)[2] + 1)
-        if path is None:
-            return False
-        return boxes_meet(path[0], path[1], np.asarray(box[0])[None], np.asarray(box[1])[None])
-
     def _yields(self, fleet: JunctionFleet, row: int, z: int, waiters: np.ndarray) -> bool:
         """Row ``row`` lets the other waiters of zone ``z`` go first when its wide path beyond its stop
-        point (:meth:`_wide_path`: the claims it will make through the zone, padded) meets the box of
+        point (:meth:`tm.gate_paths.GatePaths.wide_path`: the claims it will make through the zone, padded) meets the box of
         one of them standing at its stop point, and that one's path does not meet ``row``'s (then
         that one goes first: a vehicle waiting at its entry line does not move until it has the
         token, and a holder whose next claims meet it would stand inside the guard for good --
@@ -521,25 +435,11 @@ class AuthorityGate(JunctionGate):
         misses its own."""
         if not len(others):
             return []
-        mine = self._standing(fleet, row)
-        on = self._on_route(fleet, row, others)
+        mine = self.paths.standing(fleet, row)
+        on = self.paths.on_route(fleet, row, others)
         return [int(j) for j, q in zip(others.tolist(), on.tolist())
-                if not q and self._beyond_meets(fleet, row, z, self._standing(fleet, j))
-                and not self._beyond_meets(fleet, j, z, mine)]
-
-    def _on_route(self, fleet: JunctionFleet, row: int, j: np.ndarray, ahead: int = 0) -> np.ndarray:
-        """Which rows ``j`` have their requested stop point (``k + ahead``) on row ``row``'s route
-        (within ``0.6 δ`` of one of its waypoints: the same lanes, ahead of it or behind)."""
-        W = fleet.route(row)[0]
-        if not len(j):
-            return np.zeros(0, dtype=bool)
-        pts, tol = [], []
-        for jj in j.tolist():
-            Wj, _, kj = fleet.route(jj)
-            pts.append(Wj[min(kj + ahead, len(Wj) - 1)])
-            tol.append(0.6 * self.classes[fleet.family[jj]].delta)
-        d = np.hypot(W[:, None, 0] - np.array(pts)[None, :, 0], W[:, None, 1] - np.array(pts)[None, :, 1])
-        return d.min(axis=0) <= np.array(tol)
+                if not q and self.paths.beyond_meets(fleet, row, z, self.paths.standing(fleet, j))
+                and not self.paths.beyond_meets(fleet, j, z, mine)]
 
     def withhold(self, t: int, fleet: JunctionFleet, requesting: np.ndarray, new_lo: np.ndarray,
                  new_hi: np.ndarray) -> np.ndarray:
@@ -552,7 +452,7 @@ class AuthorityGate(JunctionGate):
     def _keep_out(self, fleet: JunctionFleet, req: np.ndarray) -> np.ndarray:
         """The requests that stay after :class:`tm.keep_out.KeepOut` (the holders' wide paths kept
         clear of vehicles coming to stand in them), counted as withheld."""
-        out, n = self.keep_out.apply(fleet, req, self.holders, self._wide_paths, self._on_route)
+        out, n = self.keep_out.apply(fleet, req, self.holders, self.paths.wide_paths, self.paths.on_route)
         self.requests_withheld += n
         self.wide_withheld += n
         return out
@@ -658,7 +558,7 @@ class AuthorityGate(JunctionGate):
     def _standing_hits(self, fleet: JunctionFleet, zq: np.ndarray, rq: np.ndarray, first: np.ndarray,
                        c_lo: np.ndarray, c_hi: np.ndarray, zs: np.ndarray, rs: np.ndarray) -> np.ndarray:
         """:meth:`JunctionGate._standing_hits`, and a candidate whose wide path beyond its stop point
-        (:meth:`_wide_polygons`: the claims it will make through the zone, padded, as oriented boxes)
+        (:meth:`tm.gate_paths.GatePaths.wide_polygons`: the claims it will make through the zone, padded, as oriented boxes)
         meets the oriented hold box of a vehicle standing at a red in the guard cannot pass it either:
         the traffic manager would deny those claims for as long as the light stays red, and the
         candidate would stand inside the guard with the token, holding back every waiter whose
@@ -675,45 +575,20 @@ class AuthorityGate(JunctionGate):
             near = rs[(zs == z) & (rs != row)]
             if not len(near):
                 continue
-            mine = self._wide_polygons(fleet, row, z)
+            mine = self.paths.wide_polygons(fleet, row, z)
             if mine is None:
                 continue
             lo, hi = mine.min(axis=(0, 1)), mine.max(axis=(0, 1))
             near = near[np.all((fleet.claim_lo[near] <= hi) & (fleet.claim_hi[near] >= lo), axis=1)]
-            if any(polygons_meet(mine, self._standing_polygons(fleet, int(j))) for j in near.tolist()):
+            if any(polygons_meet(mine, self.paths.standing_polygons(fleet, int(j))) for j in near.tolist()):
                 hits[q] = True
                 self.red_yielded += 1
         return hits
 
-    def _wide_polygons(self, fleet: JunctionFleet, row: int, z: int) -> np.ndarray | None:
-        """Row ``row``'s wide path through zone ``z`` beyond its stop point (the boxes of
-        :meth:`_wide_path` from the next waypoint on, to the route's end where it ends in the guard)
-        as oriented boxes (h n, 4, 2), each waypoint's at its arriving and leaving headings; None when
-        no waypoint is left there."""
-        W, H, k = fleet.route(row)
-        key = (fleet.ids[row], z, k)
-        found = self._wide_poly.get(key, _UNSET)
-        if found is _UNSET:
-            if len(self._wide_poly) > 100_000:  # stale keys: start over
-                self._wide_poly.clear()
-            idx = self._path_idx(fleet, row, z, k + 1, to_end=True)
-            found = None
-            if idx is not None:
-                found = self.classes[fleet.family[row]].corridor_polygons(W[idx], fleet.pad(row, idx), H[idx],
-                                                                          H[np.minimum(idx + 1, len(H) - 1)])
-            self._wide_poly[key] = found
-        return found
-
-    def _standing_polygons(self, fleet: JunctionFleet, row: int) -> np.ndarray:
-        """Row ``row`` at rest at its stop point: its padded hold box as oriented boxes (2, 4, 2), at
-        the stop point's arriving and leaving headings."""
-        cls, w, pad, h_in, h_out = self._at_stop(fleet, row)
-        return cls.hold_polygons(w, pad, h_in, h_out)
-
     def _passable(self, fleet: JunctionFleet, pos: dict, t: int, holder: str, row: int, z: int) -> bool:
         """A candidate may take the token beside a holder whose corridor its own meets when that
         holder is stalled (:meth:`_stalled`: its stop point has not moved for :attr:`stall_steps`
-        steps) and its standing box (:meth:`_standing`: it is at rest at its stop point) misses the
+        steps) and its standing box (:meth:`tm.gate_paths.GatePaths.standing`: it is at rest at its stop point) misses the
         candidate's corridor: the holder is not about to take that road, and the candidate may be
         what it waits for (the corridor as :meth:`_corridor_meets` takes it).  With :meth:`_stalled`
         in :meth:`JunctionGate._hand_out` (a waiter held back by stalled holders alone holds nobody
@@ -725,7 +600,7 @@ class AuthorityGate(JunctionGate):
         h_row = pos.get(holder)
         if h_row is None or not self._stalled(t, holder):
             return False
-        if self._corridor_meets(fleet, row, z, self._standing(fleet, h_row)):
+        if self._corridor_meets(fleet, row, z, self.paths.standing(fleet, h_row)):
             return False
         self.stalled_passed += 1
         return True

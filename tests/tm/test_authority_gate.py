@@ -22,6 +22,7 @@ from hypothesis import given, settings, strategies as st
 
 from tm.authority_gate import AuthorityGate
 from tm.authority_reach import AuthorityReach
+from tm.gate_paths import GatePaths
 from tm.boxes import boxes_meet
 from tm.junctions import JunctionFleet, JunctionGate, Zone
 
@@ -629,9 +630,9 @@ def test_waiters_that_would_all_yield_round_a_cycle_do_not_all_wait():
     gate = AuthorityGate([J], {"narrow": NARROW})
 
     def with_relation(meets):
-        gate._standing = lambda fleet, row: row                              # noqa: E731
-        gate._beyond_meets = lambda fleet, row, z, box: box in meets[row]    # noqa: E731
-        gate._on_route = lambda fleet, row, j, ahead=0: np.zeros(len(j), dtype=bool)  # noqa: E731
+        gate.paths.standing = lambda fleet, row: row                              # noqa: E731
+        gate.paths.beyond_meets = lambda fleet, row, z, box: box in meets[row]    # noqa: E731
+        gate.paths.on_route = lambda fleet, row, j, ahead=0: np.zeros(len(j), dtype=bool)  # noqa: E731
 
     waiters = np.arange(4)
     with_relation({0: {1}, 1: {2}, 2: {3}, 3: {0}})  # each meets the next: a cycle of four
@@ -839,7 +840,7 @@ def test_queue_lanes_are_judged_per_zone():
 
 
 def test_wide_paths_asked_together_equal_each_asked_alone():
-    """:meth:`AuthorityGate._wide_paths` computes the paths not kept yet together, one class at a
+    """:meth:`tm.gate_paths.GatePaths.wide_paths` computes the paths not kept yet together, one class at a
     time (the keep-out rule asks for every holder's at once): the same boxes as each asked alone on a
     fresh gate, for vehicles of two classes with body padding, a stop point past the slot (None) and
     a repeated ask; kept answers are the computed ones."""
@@ -856,16 +857,16 @@ def test_wide_paths_asked_together_equal_each_asked_alone():
     fleet = replace(scene.fleet(), pads=pads)
     asks = [(0, 0, 15), (1, 0, 18), (2, 0, 27), (3, 0, 60), (1, 0, 18), (0, 0, 16)]
     gate = AuthorityGate([J], {"narrow": NARROW, "truck": TRUCK})
-    together = gate._wide_paths(fleet, asks)
+    together = gate.paths.wide_paths(fleet, asks)
     assert together[3] is None and all(p is not None for n, p in enumerate(together) if n != 3)
     for ask, got in zip(asks, together):
-        alone = AuthorityGate([J], {"narrow": NARROW, "truck": TRUCK})._wide_path(fleet, *ask)
+        alone = AuthorityGate([J], {"narrow": NARROW, "truck": TRUCK}).paths.wide_path(fleet, *ask)
         if alone is None:
             assert got is None
             continue
         np.testing.assert_array_equal(got[0], alone[0])  # the same floats: elementwise, as alone
         np.testing.assert_array_equal(got[1], alone[1])
-        kept = gate._wide_path(fleet, *ask)
+        kept = gate.paths.wide_path(fleet, *ask)
         assert kept[0] is got[0] or np.array_equal(kept[0], got[0])
 
 
@@ -1034,7 +1035,7 @@ def test_a_route_ending_in_the_guard_behind_a_car_at_a_red_waits_without_the_tok
     gate, asked = run(-1.5)
     assert asked == {"C"} == _holders(gate) and gate.red_yielded == 0
     gate = _gate()
-    gate._path_idx = lambda f, r, z, first, to_end=False: AuthorityGate._path_idx(gate, f, r, z, first)  # as before
+    gate.paths.path_idx = lambda f, r, z, first, to_end=False: GatePaths.path_idx(gate.paths, f, r, z, first)  # as before
     gate, asked = run(-4.5, gate)
     assert asked == {"C"} == _holders(gate)
 

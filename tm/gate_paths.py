@@ -1,0 +1,162 @@
+"""Where a movement-authority vehicle will pass and stand near a junction: its wide path through a
+zone (the boxes that hold every claim it can make while its stop point moves to the exit slot) and
+its padded hold box at rest at its stop point, in world boxes and as oriented boxes, cached per
+vehicle, zone and stop point (:mod:`tm.authority_gate`, module notes: "room for the claims'
+width", "yield at the hand-out", "standing at a red").  Pure numpy, no simulator.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import numpy as np
+
+from tm.authority_reach import AuthorityReach
+from tm.boxes import boxes_meet
+from tm.guard_spans import GuardSpans
+from tm.junctions import JunctionFleet
+
+__all__ = ["GatePaths"]
+
+_UNSET = object()  # not kept yet (:meth:`GatePaths.wide_paths`; None is a kept answer)
+
+
+class GatePaths:
+    """Wide paths and standing boxes of a fleet's vehicles (module notes), cached.
+
+    Parameters
+    ----------
+    classes : mapping of str to AuthorityReach
+        Every class a fleet row may name.
+    spans : GuardSpans
+        The vehicles' route intervals through the guards (where a path ends: the exit slot).
+    """
+
+    def __init__(self, classes: Mapping[str, AuthorityReach], spans: GuardSpans):
+        self.classes = classes
+        self.spans = spans
+        self._wide: dict = {}  # (vehicle, zone, waypoint, first) -> its wide path (:meth:`wide_path`)
+        #: (vehicle, zone, waypoint) -> its wide path beyond its stop point as oriented boxes (:meth:`wide_polygons`)
+        self._wide_poly: dict = {}
+        self._stand_memo: tuple = (None, {})  # (fleet, row -> standing box) (:meth:`standing`)
+
+    def wide_path(self, fleet: JunctionFleet, row: int, z: int, first: int):
+        """Boxes ``(lo, hi)`` (m, 2) that hold every claim of row ``row`` while its stop point moves
+        from waypoint ``first`` to zone ``z``'s exit slot and rests there: at each of those waypoints
+        :meth:`tm.authority_reach.AuthorityReach.claim_box` (``T^0`` plus ``L/2`` along, the claims'
+        across half-width plus ``W/2`` across, the route's padding there).  None when the route does not leave the
+        guard from there (it arrives inside) or the stop point is past the slot."""
+        return self.wide_paths(fleet, [(row, z, first)])[0]
+
+    def path_idx(self, fleet: JunctionFleet, row: int, z: int, first: int,
+                 to_end: bool = False) -> np.ndarray | None:
+        """The waypoints of row ``row``'s path through zone ``z`` from waypoint ``first`` to the exit
+        slot (:meth:`wide_path`, :meth:`wide_polygons`); None when the route does not leave the guard
+        from there (``to_end``: then to the route's last waypoint, in the guard) or the stop point is
+        past the slot."""
+        k = fleet.route(row)[2]
+        span = self.spans.span_of(fleet, row, z, k + 1) or self.spans.span_of(fleet, row, z, k)
+        if span is None or not (span[2] or to_end) or first > span[1]:
+            return None
+        return np.arange(max(first, 0), span[1] + 1)
+
+    def wide_paths(self, fleet: JunctionFleet, asks: list) -> list:
+        """:meth:`wide_path` of each ``(row, z, first)`` of ``asks``, kept per (vehicle, zone, stop
+        point, first); those not kept yet computed together (their boxes one class at a time)."""
+        if len(self._wide) > 100_000:  # stale keys: start over
+            self._wide.clear()
+        out, todo = [], []
+        for row, z, first in asks:
+            W, H, k = fleet.route(row)
+            key = (fleet.ids[row], z, k, first)
+            found = self._wide.get(key, _UNSET)
+            if found is _UNSET:
+                idx = self.path_idx(fleet, row, z, first)
+                if idx is None:
+                    found = self._wide[key] = None
+                else:
+                    todo.append((len(out), key, row, W, H, idx))
+            out.append(found)
+        for c in sorted({fleet.family[t[2]] for t in todo}):
+            mine = [t for t in todo if fleet.family[t[2]] == c]
+            pad = fleet.pad_rows(np.concatenate([np.full(len(idx), row) for _, _, row, _, _, idx in mine]),
+                                 np.concatenate([idx for *_, idx in mine]))  # one lookup for all
+            lo, hi = self.classes[c].claim_box(
+                pad, np.concatenate([H[idx] for *_, H, idx in mine]),
+                np.concatenate([H[np.minimum(idx + 1, len(H) - 1)] for *_, H, idx in mine]))
+            o = 0
+            for n, key, _, W, _, idx in mine:
+                m = len(idx)
+                out[n] = self._wide[key] = (W[idx] + lo[o:o + m], W[idx] + hi[o:o + m])
+                o += m
+        return out
+
+    def standing(self, fleet: JunctionFleet, row: int) -> tuple[np.ndarray, np.ndarray]:
+        """World box ``(lo, hi)`` (2,) of row ``row`` at rest at its stop point (padded hold box);
+        kept for the fleet it was asked for (a step's rounds ask for the same waiters often)."""
+        memo = self._stand_memo
+        if memo[0] is not fleet:
+            memo = self._stand_memo = (fleet, {})
+        got = memo[1].get(row)
+        if got is None:
+            got = memo[1][row] = self.standing_box(fleet, row)
+        return got
+
+    def at_stop(self, fleet: JunctionFleet, row: int) -> tuple:
+        """Row ``row``'s class, stop point ``W[k]`` (1, 2), padding there (1, 4) and the stop point's
+        arriving and leaving headings (1,) each: what its hold box at rest is drawn from."""
+        W, H, k = fleet.route(row)
+        idx = np.array([k])
+        return (self.classes[fleet.family[row]], W[idx], fleet.pad(row, idx), H[idx],
+                H[np.minimum(idx + 1, len(H) - 1)])
+
+    def standing_box(self, fleet: JunctionFleet, row: int) -> tuple[np.ndarray, np.ndarray]:
+        cls, w, pad, h_in, h_out = self.at_stop(fleet, row)
+        lo, hi = cls.hold_box(pad, h_in, h_out)
+        return w[0] + lo[0], w[0] + hi[0]
+
+    def beyond_meets(self, fleet: JunctionFleet, row: int, z: int, box) -> bool:
+        """Whether row ``row``'s wide path through zone ``z`` beyond its stop point meets ``box``."""
+        path = self.wide_path(fleet, row, z, fleet.route(row)[2] + 1)
+        if path is None:
+            return False
+        return boxes_meet(path[0], path[1], np.asarray(box[0])[None], np.asarray(box[1])[None])
+
+    def wide_polygons(self, fleet: JunctionFleet, row: int, z: int) -> np.ndarray | None:
+        """Row ``row``'s wide path through zone ``z`` beyond its stop point (the boxes of
+        :meth:`wide_path` from the next waypoint on, to the route's end where it ends in the guard)
+        as oriented boxes (h n, 4, 2), each waypoint's at its arriving and leaving headings; None when
+        no waypoint is left there."""
+        W, H, k = fleet.route(row)
+        key = (fleet.ids[row], z, k)
+        found = self._wide_poly.get(key, _UNSET)
+        if found is _UNSET:
+            if len(self._wide_poly) > 100_000:  # stale keys: start over
+                self._wide_poly.clear()
+            idx = self.path_idx(fleet, row, z, k + 1, to_end=True)
+            found = None
+            if idx is not None:
+                found = self.classes[fleet.family[row]].corridor_polygons(W[idx], fleet.pad(row, idx), H[idx],
+                                                                          H[np.minimum(idx + 1, len(H) - 1)])
+            self._wide_poly[key] = found
+        return found
+
+    def standing_polygons(self, fleet: JunctionFleet, row: int) -> np.ndarray:
+        """Row ``row`` at rest at its stop point: its padded hold box as oriented boxes (2, 4, 2), at
+        the stop point's arriving and leaving headings."""
+        cls, w, pad, h_in, h_out = self.at_stop(fleet, row)
+        return cls.hold_polygons(w, pad, h_in, h_out)
+
+    def on_route(self, fleet: JunctionFleet, row: int, j: np.ndarray, ahead: int = 0) -> np.ndarray:
+        """Which rows ``j`` have their requested stop point (``k + ahead``) on row ``row``'s route
+        (within ``0.6 δ`` of one of its waypoints: the same lanes, ahead of it or behind)."""
+        W = fleet.route(row)[0]
+        if not len(j):
+            return np.zeros(0, dtype=bool)
+        pts, tol = [], []
+        for jj in j.tolist():
+            Wj, _, kj = fleet.route(jj)
+            pts.append(Wj[min(kj + ahead, len(Wj) - 1)])
+            tol.append(0.6 * self.classes[fleet.family[jj]].delta)
+        d = np.hypot(W[:, None, 0] - np.array(pts)[None, :, 0], W[:, None, 1] - np.array(pts)[None, :, 1])
+        return d.min(axis=0) <= np.array(tol)
