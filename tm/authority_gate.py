@@ -395,7 +395,7 @@ class AuthorityGate(JunctionGate):
     # ------------------------------------------------------------------ the moving claims' width
     def _yields(self, fleet: JunctionFleet, row: int, z: int, waiters: np.ndarray) -> bool:
         """Row ``row`` lets the other waiters of zone ``z`` go first when its wide path beyond its stop
-        point (:meth:`tm.gate_paths.GatePaths.wide_path`: the claims it will make through the zone, padded) meets the box of
+        point (:meth:`GatePaths.wide_path`: the claims it will make through the zone, padded) meets the box of
         one of them standing at its stop point, and that one's path does not meet ``row``'s (then
         that one goes first: a vehicle waiting at its entry line does not move until it has the
         token, and a holder whose next claims meet it would stand inside the guard for good --
@@ -558,7 +558,7 @@ class AuthorityGate(JunctionGate):
     def _standing_hits(self, fleet: JunctionFleet, zq: np.ndarray, rq: np.ndarray, first: np.ndarray,
                        c_lo: np.ndarray, c_hi: np.ndarray, zs: np.ndarray, rs: np.ndarray) -> np.ndarray:
         """:meth:`JunctionGate._standing_hits`, and a candidate whose wide path beyond its stop point
-        (:meth:`tm.gate_paths.GatePaths.wide_polygons`: the claims it will make through the zone, padded, as oriented boxes)
+        (:meth:`GatePaths.wide_polygons`: the claims it will make through the zone, padded, as oriented boxes)
         meets the oriented hold box of a vehicle standing at a red in the guard cannot pass it either:
         the traffic manager would deny those claims for as long as the light stays red, and the
         candidate would stand inside the guard with the token, holding back every waiter whose
@@ -588,7 +588,7 @@ class AuthorityGate(JunctionGate):
     def _passable(self, fleet: JunctionFleet, pos: dict, t: int, holder: str, row: int, z: int) -> bool:
         """A candidate may take the token beside a holder whose corridor its own meets when that
         holder is stalled (:meth:`_stalled`: its stop point has not moved for :attr:`stall_steps`
-        steps) and its standing box (:meth:`tm.gate_paths.GatePaths.standing`: it is at rest at its stop point) misses the
+        steps) and its standing box (:meth:`GatePaths.standing`: it is at rest at its stop point) misses the
         candidate's corridor: the holder is not about to take that road, and the candidate may be
         what it waits for (the corridor as :meth:`_corridor_meets` takes it).  With :meth:`_stalled`
         in :meth:`JunctionGate._hand_out` (a waiter held back by stalled holders alone holds nobody

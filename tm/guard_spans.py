@@ -136,9 +136,9 @@ class GuardSpans:
         return int(entries[0]) - 1 if len(entries) else len(W) - 1
 
     def span_of(self, fleet: JunctionFleet, row: int, z: int, target: int):
-        """``(entry, exit, exits)`` of zone ``z``'s first interval not left before waypoint
-        ``target`` (the one holding it, or the next one: a chained zone's, :meth:`tm.authority_gate.AuthorityGate._wanting`), or
-        None."""
+        """``(entry, exit, exits)`` of zone ``z``'s first interval not left before waypoint ``target``
+        (the one holding it, or the next one: a chained zone's,
+        :meth:`tm.authority_gate.AuthorityGate._wanting`), or None."""
         vid = fleet.ids[row]
         runs = self._runs.get(vid)
         if runs is None:  # the intervals as Python tuples: a few per route, asked for thousands of times a step
