@@ -176,9 +176,6 @@ class AuthorityGate(JunctionGate):
         self.red_yielded = 0
         #: over the run: holders' corridors cut behind them (:meth:`_trim`)
         self.corridors_cut = 0
-        #: (vehicle, its path's entry and exit slot, leader, the leader's) -> whether they are the same lanes
-        #: (:meth:`_follows`; the paths are pieces of the routes, which never change)
-        self._lanes: dict = {}
         #: (zone, vehicle) -> the exit slot of the interval the token was handed out for: kept while the
         #: holder's stop point has not reached it (:meth:`_release`)
         self.pending: dict[tuple[int, str], int] = {}
@@ -345,101 +342,16 @@ class AuthorityGate(JunctionGate):
             self.holders[z][v] = c
 
     def _follows(self, fleet: JunctionFleet, pos: dict, row: int, z: int, leaders: list) -> bool:
-        """A queue through the junction: row ``row`` may take zone ``z``'s token although its
-        corridor meets the holders ``leaders``' (or their claims fill its exit slot) when each of
-        them drives the same path through the zone (every waypoint of its path from entry to exit
-        slot within ``0.6 δ`` of theirs: the same lanes) ahead of it, and the road from its exit
-        slot on has room for them all and for it: the hold boxes at the waypoints from the slot
-        over ``sum_j ceil(((L_j + L) / 2 + hold_j + hold) / δ)`` more meet no claim but theirs.
-        Then none of them can stop inside the guard: nobody else enters that road but through this
-        zone's exit slot, which every other candidate's corridor meets."""
-        W, H, k = fleet.route(row)
-        span = self.spans.span_of(fleet, row, z, k + 1)
-        if span is None or not span[2]:
-            return False
-        cls = self.classes[fleet.family[row]]
-        mine = W[span[0]:span[1] + 1]
-        tol = 0.6 * cls.delta
-        rows, m = [], 0
-        if len(self._lanes) > 100_000:  # stale keys: start over
-            self._lanes.clear()
-        for h in leaders:
-            j = pos.get(h)
-            if j is None:
-                return False
-            Wj, _, kj = fleet.route(j)
-            sj = self.spans.span_of(fleet, j, z, kj + 1) or self.spans.span_of(fleet, j, z, kj)  # as :meth:`_path`
-            if sj is None or sj[1] < sj[0]:
-                return False
-            key = (fleet.ids[row], span[0], span[1], h, sj[0], sj[1])  # both paths: routes only
-            same = self._lanes.get(key)
-            if same is None:
-                theirs = Wj[sj[0]:sj[1] + 1]
-                d = np.linalg.norm(mine[:, None, :] - theirs[None, :, :], axis=2).min(axis=1)
-                same = self._lanes[key] = not d.max() > tol
-            if not same:
-                return False
-            c = self.classes[fleet.family[j]]
-            rows.append(j)
-            m += int(np.ceil((0.5 * (c.length + cls.length) + c.hold + cls.hold) / cls.delta))
-        x = span[1]
-        idx = np.arange(x, min(x + m, len(W) - 1) + 1)
-        half = cls.hold_half(H[idx], H[np.minimum(idx + 1, len(H) - 1)])
-        lo, hi = W[idx] - half, W[idx] + half
-        near = np.flatnonzero(np.all((fleet.claim_lo <= hi.max(axis=0)) & (fleet.claim_hi >= lo.min(axis=0)), axis=1))
-        near = near[~np.isin(near, [row] + rows)]  # the queue's own claims do not count
-        near = near[self.passes([fleet.ids[j] for j in near.tolist()], np.full(len(near), z))]  # nor passers-by
-        c_lo, c_hi = fleet.claim_lo[near], fleet.claim_hi[near]
-        return not np.any(np.all((lo[:, None, :] <= c_hi[None]) & (hi[:, None, :] >= c_lo[None]), axis=2))
+        """A queue through the junction (module notes, "queues"): :meth:`GatePaths.follows`."""
+        return self.paths.follows(fleet, pos, row, z, leaders)
 
     # ------------------------------------------------------------------ the moving claims' width
     def _yields(self, fleet: JunctionFleet, row: int, z: int, waiters: np.ndarray) -> bool:
-        """Row ``row`` lets the other waiters of zone ``z`` go first when its wide path beyond its stop
-        point (:meth:`GatePaths.wide_path`: the claims it will make through the zone, padded) meets the box of
-        one of them standing at its stop point, and that one's path does not meet ``row``'s (then
-        that one goes first: a vehicle waiting at its entry line does not move until it has the
-        token, and a holder whose next claims meet it would stand inside the guard for good --
-        ``grid`` seed 2: bus 84 took C1's token to turn left beside bus 80 waiting at its entry line,
-        and never moved again).  Vehicles on ``row``'s own route (its queue) do not count.
-
-        Only when the waiters it would let go first lead, yielding in turn, to one that yields to
-        nobody (who will take the token): where they only lead round a cycle (``grid`` seed 1 with
-        path-frame plants: the four approaches of one zone, each the next one's target, waited for
-        ever, 33 of 150 never arrived), nobody on it yields and the first in line takes the token."""
-        waiters = np.array([int(j) for j in waiters], dtype=np.intp)
-        if len(waiters) < 2:
-            return False
-        targets: dict[int, list[int]] = {}
-
-        def of(r: int) -> list[int]:
-            if r not in targets:
-                targets[r] = self._targets(fleet, r, z, waiters[waiters != r])
-            return targets[r]
-
-        seen, todo = {row}, list(of(row))
-        while todo:  # does a chain of targets from row end at a waiter that yields to nobody?
-            j = todo.pop()
-            if j in seen:
-                continue
-            seen.add(j)
-            nxt = of(j)
-            if not nxt:
-                self.yielded += 1
-                return True
-            todo.extend(nxt)
-        return False
-
-    def _targets(self, fleet: JunctionFleet, row: int, z: int, others: np.ndarray) -> list[int]:
-        """The rows among ``others`` (not on ``row``'s route) that ``row`` would let go first
-        (:meth:`_yields`): its wide path beyond its stop point meets their standing box and theirs
-        misses its own."""
-        if not len(others):
-            return []
-        mine = self.paths.standing(fleet, row)
-        on = self.paths.on_route(fleet, row, others)
-        return [int(j) for j, q in zip(others.tolist(), on.tolist())
-                if not q and self.paths.beyond_meets(fleet, row, z, self.paths.standing(fleet, j))
-                and not self.paths.beyond_meets(fleet, j, z, mine)]
+        """Row ``row`` lets the other waiters of zone ``z`` go first (module notes, "yield at the
+        hand-out"): :meth:`GatePaths.yields`, counted in :attr:`yielded`."""
+        out = self.paths.yields(fleet, row, z, waiters)
+        self.yielded += int(out)
+        return out
 
     def withhold(self, t: int, fleet: JunctionFleet, requesting: np.ndarray, new_lo: np.ndarray,
                  new_hi: np.ndarray) -> np.ndarray:

@@ -1,8 +1,11 @@
 """Where a movement-authority vehicle will pass and stand near a junction: its wide path through a
 zone (the boxes that hold every claim it can make while its stop point moves to the exit slot) and
 its padded hold box at rest at its stop point, in world boxes and as oriented boxes, cached per
-vehicle, zone and stop point (:mod:`tm.authority_gate`, module notes: "room for the claims'
-width", "yield at the hand-out", "standing at a red").  Pure numpy, no simulator.
+vehicle, zone and stop point; and the two hand-out rules that are questions of those paths alone:
+whether a candidate queues behind holders on the same lanes with room beyond the exit slot
+(:meth:`GatePaths.follows`) and whether it lets a waiter go first (:meth:`GatePaths.yields`)
+(:mod:`tm.authority_gate`, module notes: "room for the claims' width", "yield at the hand-out",
+"standing at a red", "queues").  Pure numpy, no simulator.
 """
 
 from __future__ import annotations
@@ -22,7 +25,8 @@ _UNSET = object()  # not kept yet (:meth:`GatePaths.wide_paths`; None is a kept 
 
 
 class GatePaths:
-    """Wide paths and standing boxes of a fleet's vehicles (module notes), cached.
+    """Wide paths and standing boxes of a fleet's vehicles, cached, and the queue and yield rules
+    on them (module notes).
 
     Parameters
     ----------
@@ -39,6 +43,9 @@ class GatePaths:
         #: (vehicle, zone, waypoint) -> its wide path beyond its stop point as oriented boxes (:meth:`wide_polygons`)
         self._wide_poly: dict = {}
         self._stand_memo: tuple = (None, {})  # (fleet, row -> standing box) (:meth:`standing`)
+        #: (vehicle, its path's entry and exit slot, leader, the leader's) -> whether they are the same lanes
+        #: (:meth:`follows`; the paths are pieces of the routes, which never change)
+        self._lanes: dict = {}
 
     def wide_path(self, fleet: JunctionFleet, row: int, z: int, first: int):
         """Boxes ``(lo, hi)`` (m, 2) that hold every claim of row ``row`` while its stop point moves
@@ -160,3 +167,98 @@ class GatePaths:
             tol.append(0.6 * self.classes[fleet.family[jj]].delta)
         d = np.hypot(W[:, None, 0] - np.array(pts)[None, :, 0], W[:, None, 1] - np.array(pts)[None, :, 1])
         return d.min(axis=0) <= np.array(tol)
+
+    def follows(self, fleet: JunctionFleet, pos: dict, row: int, z: int, leaders: list) -> bool:
+        """A queue through the junction: row ``row`` may take zone ``z``'s token although its
+        corridor meets the holders ``leaders``' (or their claims fill its exit slot) when each of
+        them drives the same path through the zone (every waypoint of its path from entry to exit
+        slot within ``0.6 δ`` of theirs: the same lanes) ahead of it, and the road from its exit
+        slot on has room for them all and for it: the hold boxes at the waypoints from the slot
+        over ``sum_j ceil(((L_j + L) / 2 + hold_j + hold) / δ)`` more meet no claim but theirs.
+        Then none of them can stop inside the guard: nobody else enters that road but through this
+        zone's exit slot, which every other candidate's corridor meets."""
+        W, H, k = fleet.route(row)
+        span = self.spans.span_of(fleet, row, z, k + 1)
+        if span is None or not span[2]:
+            return False
+        cls = self.classes[fleet.family[row]]
+        mine = W[span[0]:span[1] + 1]
+        tol = 0.6 * cls.delta
+        rows, m = [], 0
+        if len(self._lanes) > 100_000:  # stale keys: start over
+            self._lanes.clear()
+        for h in leaders:
+            j = pos.get(h)
+            if j is None:
+                return False
+            Wj, _, kj = fleet.route(j)
+            sj = self.spans.span_of(fleet, j, z, kj + 1) or self.spans.span_of(fleet, j, z, kj)  # as :meth:`path_idx`
+            if sj is None or sj[1] < sj[0]:
+                return False
+            key = (fleet.ids[row], span[0], span[1], h, sj[0], sj[1])  # both paths: routes only
+            same = self._lanes.get(key)
+            if same is None:
+                theirs = Wj[sj[0]:sj[1] + 1]
+                d = np.linalg.norm(mine[:, None, :] - theirs[None, :, :], axis=2).min(axis=1)
+                same = self._lanes[key] = not d.max() > tol
+            if not same:
+                return False
+            c = self.classes[fleet.family[j]]
+            rows.append(j)
+            m += int(np.ceil((0.5 * (c.length + cls.length) + c.hold + cls.hold) / cls.delta))
+        x = span[1]
+        idx = np.arange(x, min(x + m, len(W) - 1) + 1)
+        half = cls.hold_half(H[idx], H[np.minimum(idx + 1, len(H) - 1)])
+        lo, hi = W[idx] - half, W[idx] + half
+        near = np.flatnonzero(np.all((fleet.claim_lo <= hi.max(axis=0)) & (fleet.claim_hi >= lo.min(axis=0)), axis=1))
+        near = near[~np.isin(near, [row] + rows)]  # the queue's own claims do not count
+        near = near[self.spans.passes([fleet.ids[j] for j in near.tolist()], np.full(len(near), z))]  # nor passers-by
+        c_lo, c_hi = fleet.claim_lo[near], fleet.claim_hi[near]
+        return not np.any(np.all((lo[:, None, :] <= c_hi[None]) & (hi[:, None, :] >= c_lo[None]), axis=2))
+
+    def yields(self, fleet: JunctionFleet, row: int, z: int, waiters: np.ndarray) -> bool:
+        """Row ``row`` lets the other waiters of zone ``z`` go first when its wide path beyond its stop
+        point (:meth:`wide_path`: the claims it will make through the zone, padded) meets the box of
+        one of them standing at its stop point, and that one's path does not meet ``row``'s (then
+        that one goes first: a vehicle waiting at its entry line does not move until it has the
+        token, and a holder whose next claims meet it would stand inside the guard for good --
+        ``grid`` seed 2: bus 84 took C1's token to turn left beside bus 80 waiting at its entry line,
+        and never moved again).  Vehicles on ``row``'s own route (its queue) do not count.
+
+        Only when the waiters it would let go first lead, yielding in turn, to one that yields to
+        nobody (who will take the token): where they only lead round a cycle (``grid`` seed 1 with
+        path-frame plants: the four approaches of one zone, each the next one's target, waited for
+        ever, 33 of 150 never arrived), nobody on it yields and the first in line takes the token."""
+        waiters = np.array([int(j) for j in waiters], dtype=np.intp)
+        if len(waiters) < 2:
+            return False
+        targets: dict[int, list[int]] = {}
+
+        def of(r: int) -> list[int]:
+            if r not in targets:
+                targets[r] = self.targets(fleet, r, z, waiters[waiters != r])
+            return targets[r]
+
+        seen, todo = {row}, list(of(row))
+        while todo:  # does a chain of targets from row end at a waiter that yields to nobody?
+            j = todo.pop()
+            if j in seen:
+                continue
+            seen.add(j)
+            nxt = of(j)
+            if not nxt:
+                return True
+            todo.extend(nxt)
+        return False
+
+    def targets(self, fleet: JunctionFleet, row: int, z: int, others: np.ndarray) -> list[int]:
+        """The rows among ``others`` (not on ``row``'s route) that ``row`` would let go first
+        (:meth:`yields`): its wide path beyond its stop point meets their standing box and theirs
+        misses its own."""
+        if not len(others):
+            return []
+        mine = self.standing(fleet, row)
+        on = self.on_route(fleet, row, others)
+        return [int(j) for j, q in zip(others.tolist(), on.tolist())
+                if not q and self.beyond_meets(fleet, row, z, self.standing(fleet, j))
+                and not self.beyond_meets(fleet, j, z, mine)]
