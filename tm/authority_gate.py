@@ -345,7 +345,6 @@ class AuthorityGate(JunctionGate):
         """A queue through the junction (module notes, "queues"): :meth:`GatePaths.follows`."""
         return self.paths.follows(fleet, pos, row, z, leaders)
 
-    # ------------------------------------------------------------------ the moving claims' width
     def _yields(self, fleet: JunctionFleet, row: int, z: int, waiters: np.ndarray) -> bool:
         """Row ``row`` lets the other waiters of zone ``z`` go first (module notes, "yield at the
         hand-out"): :meth:`GatePaths.yields`, counted in :attr:`yielded`."""
@@ -353,6 +352,7 @@ class AuthorityGate(JunctionGate):
         self.yielded += int(out)
         return out
 
+    # ------------------------------------------------------------------ the moving claims' width
     def withhold(self, t: int, fleet: JunctionFleet, requesting: np.ndarray, new_lo: np.ndarray,
                  new_hi: np.ndarray) -> np.ndarray:
         """:meth:`JunctionGate.withhold`, then the holders' paths kept clear (:meth:`_keep_out`)."""
