@@ -422,9 +422,9 @@ class AuthorityGate(JunctionGate):
             js = js[js != rq[q]]
             near = np.all((lo2[a:b, None] <= cur_hi[js]) & (hi2[a:b, None] >= cur_lo[js]), axis=2).any(axis=0)
             js = js[near]
-            polys = self._ahead_polygons(fleet, int(rq[q]), keys[q])
-            jp, owner = fleet.claim_polygons(js)
-            hits[q] = any(polygons_meet(polys, jp[owner == i]) for i in range(len(js)))
+            # some oriented box of the corridor ahead meets some of theirs (all of them at once)
+            hits[q] = len(js) > 0 and polygons_meet(self._ahead_polygons(fleet, int(rq[q]), keys[q]),
+                                                    fleet.claim_polygons(js)[0])
         return hits
 
     def _ahead_polygons(self, fleet: JunctionFleet, row: int, key) -> np.ndarray:

@@ -66,19 +66,15 @@ class GuardSpans:
         The zones' shared guard boxes (:class:`tm.junctions.JunctionGate`).
     classes : mapping of str to AuthorityReach
         Every class a fleet row may name (its hold box).
-    through : mapping of str to frozenset of int
-        Vehicle id -> the zones its route passes through (absent: every zone;
-        :attr:`tm.junctions.JunctionGate.through`).
     passes : callable
         ``(ids, zones) -> bool array``: whether each vehicle's route passes through the zone
-        (:meth:`tm.junctions.JunctionGate.passes`).
+        (:meth:`tm.junctions.JunctionGate.passes`: every zone for a vehicle it has no route of).
     """
 
-    def __init__(self, guards: GuardIndex, classes: Mapping[str, AuthorityReach], through: Mapping,
+    def __init__(self, guards: GuardIndex, classes: Mapping[str, AuthorityReach],
                  passes: Callable[[list, np.ndarray], np.ndarray]):
         self.guards = guards
         self.classes = classes
-        self.through = through
         self.passes = passes
         self._intervals: dict[str, tuple] = {}  # vehicle id -> :meth:`intervals`
         self._runs: dict[str, list] = {}  # vehicle id -> its intervals as tuples (:meth:`span_of`)
@@ -114,10 +110,10 @@ class GuardSpans:
         """``(waypoint, zone)`` pairs of a route ``W`` (headings ``H``) whose hold box (``T^0 ⊕
         footprint`` at the arriving and leaving headings) meets a zone's shared guard (the largest
         class's: no holder's claims stick out of the zone further, :mod:`tm.authority_gate`); with vehicle id
-        ``vid``, only the zones its route passes through (``through``)."""
+        ``vid``, only the zones its route passes through (``passes``)."""
         half = self.classes[vclass].hold_half(H, np.r_[H[1:], H[-1:]])
         i, z = self.guards.pairs(W - half, W + half)
-        if vid is not None and vid in self.through:
+        if vid is not None:
             on = self.passes([vid] * len(z), z)
             i, z = i[on], z[on]
         return i, z
@@ -127,7 +123,7 @@ class GuardSpans:
         the first of its guard intervals (:meth:`intervals`) that starts after its first waypoint: the
         furthest stop point a vehicle entering on it may have without a token (bridge/departure.py);
         its last waypoint when there is none.  ``vid``: the vehicle's id (only the zones its route
-        passes through count, ``through``)."""
+        passes through count, ``passes``)."""
         W, H = np.asarray(W, dtype=float), np.asarray(H, dtype=float)
         i, _ = self.guard_hits(W, H, vclass, vid)
         inside = np.zeros(len(W), dtype=bool)
