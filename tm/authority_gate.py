@@ -150,7 +150,7 @@ class AuthorityGate(JunctionGate):
     def __init__(self, zones, classes: dict, through: dict | None = None):
         super().__init__(zones, classes, through)
         #: every vehicle's route intervals through the guards (cached per vehicle)
-        self.spans = GuardSpans(self.guards, self.classes, self.through, self.passes)
+        self.spans = GuardSpans(self.guards, self.classes, self.passes)
         #: their wide paths through the zones and standing boxes (cached)
         self.paths = GatePaths(self.classes, self.spans)
         #: route key -> the corridor's oriented boxes (:meth:`route_through`, :meth:`corridors_meet`)
