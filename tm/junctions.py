@@ -417,7 +417,7 @@ class JunctionGate:
                 follows = (blocked_exit[q] or meet) and self._follows(fleet, pos, row_q, z, meet)
                 if blocked_exit[q] and not follows:
                     continue
-                if meet and not follows:
+                if meet and not follows and not self._after(fleet, pos, row_q, z, meet):
                     if not all(self._stalled(t, h) for h in meet):  # else it holds nobody back
                         blocked.append((key_q, lo_q, hi_q))
                     continue
@@ -468,6 +468,11 @@ class JunctionGate:
     def _yields(self, fleet: JunctionFleet, row: int, z: int, waiters: np.ndarray) -> bool:
         """Whether row ``row``, next in line for zone ``z``'s token, lets the other ``waiters`` of
         ``z`` (rows) go first this round (never, here)."""
+        return False
+
+    def _after(self, fleet: JunctionFleet, pos: dict, row: int, z: int, holders: list) -> bool:
+        """Whether row ``row`` may take zone ``z``'s token although its corridor meets the corridors
+        of the holders ``holders``, to go after them (never, here: it waits for them to release it)."""
         return False
 
     def _follows(self, fleet: JunctionFleet, pos: dict, row: int, z: int, leaders: list) -> bool:

@@ -46,14 +46,16 @@ class KeepOut:
                           default=0.0) + 10.0
 
     def apply(self, fleet: JunctionFleet, req: np.ndarray, holders: Sequence[dict],
-              wide_paths: Callable, on_route: Callable) -> tuple[np.ndarray, int]:
+              wide_paths: Callable, on_route: Callable,
+              after: Mapping[str, set] | None = None) -> tuple[np.ndarray, int]:
         """Withhold the requests whose requested stop point's standing box
         (:meth:`AuthorityReach.hold_box`, padded) meets a zone ``z`` holder's wide path (``wide_paths``)
         from its stop point on while their current one does not: of vehicles without ``z``'s
         token, and of those on the holder's route (its queue, ``z`` holders that follow it through
         included), for which the path counts from the waypoint after the holder's stop point (a
         queue closes up to the holder, not into the claims its turn swings back).  Other ``z``
-        holders are exempt (their corridors miss this one's).  Nobody comes to stand in claims a
+        holders are exempt (their corridors miss this one's), but not one that took the token after
+        this one (``after``).  Nobody comes to stand in claims a
         holder still has to make to leave the guard.  (It does not help against one that stood
         there before the token was handed out: a hand-out rule refusing the token then, tried on
         ``grid`` seed 1, refused every waiter of a busy junction, each standing in another's wide
@@ -72,6 +74,9 @@ class KeepOut:
         on_route : callable
             ``(fleet, row, rows, ahead) -> bool array``: which ``rows`` have their stop point ``+ ahead``
             on ``row``'s route (:meth:`tm.authority_gate.AuthorityGate._on_route`).
+        after : mapping of str to set of str, optional
+            Holder id -> the holders whose paths it keeps out of although it holds their zone's token
+            too: it took the token after them (:meth:`tm.authority_gate.AuthorityGate._after`).
 
         Returns
         -------
@@ -81,6 +86,7 @@ class KeepOut:
         """
         ids = fleet.ids
         pos = dict(zip(ids, range(len(ids))))
+        after = after or {}
         r = np.flatnonzero(req)
         if not len(r):
             return req, 0
@@ -120,7 +126,7 @@ class KeepOut:
         for hs, row, lo, hi, near in todo:
             if not len(near):
                 continue
-            co = set(pos[v] for v in hs if v in pos)
+            co = set(pos[v] for v in hs if v in pos and ids[row] not in after.get(v, ()))
             q = at[near]  # (n, 2, m): the standing boxes now and asked for against each box of the path
             hits = np.all((b_lo[q][:, :, None, :] <= hi[None, None]) & (b_hi[q][:, :, None, :] >= lo[None, None]),
                           axis=3)

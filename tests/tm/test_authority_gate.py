@@ -5,6 +5,11 @@ waypoint ``k`` is the vehicle's stop point), each vehicle's claim box given expl
 its hold box: at rest at its stop point).  Geometry is exact box comparisons of the same floats;
 every offset between boxes is at least 0.2 m, far from round-off.
 
+Ordered entry (:meth:`AuthorityGate._after`: a candidate whose corridor meets a holder's takes the
+token after it and keeps out of its path) is off here: every other rule is stated against a
+candidate that waits for the holders its corridor meets.  Its own tests, on the same scenes, are in
+``test_ordered_entry.py``.
+
 The class (``CAR``): ``T^0`` within 0.25 m along and 0.2 m across, claims within 1.0 m across,
 footprint 4 m x 1.8 m, δ = 1 m.  Hold box ``T^0 ⊕ footprint``: ±2.25 m along, ±1.1 m across;
 corridor box: ±2.75 m along (δ/2 + T^0 + L/2), ±1.1 m across (T^0 + W/2).  The guard of the 10 m zone ``J``
@@ -92,6 +97,12 @@ class Scene:
         n = int(self.requesting.sum())
         req = gate.withhold(t, self.fleet(), self.requesting, np.zeros((n, 2)), np.zeros((n, 2)))
         return {v for v, q in zip(self.ids, req) if q}
+
+
+@pytest.fixture(autouse=True)
+def _candidates_wait_for_holders(monkeypatch):
+    """Ordered entry off for this module's gates (module notes)."""
+    monkeypatch.setattr(AuthorityGate, "ordered_entry", False)
 
 
 def _gate():
