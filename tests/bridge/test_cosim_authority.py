@@ -248,3 +248,13 @@ def test_entry_claims_are_computed_once_per_waiting_vehicle(frame, monkeypatch):
     assert sum(seen) > 3 * len(specs)  # vehicles waited several steps ...
     assert sorted(fresh_rows) == sorted(sp.id for sp in specs)  # ... yet each was computed once
     assert all(r.admitted_s is not None for r in sim.records.values())
+
+
+@pytest.mark.parametrize("check", ["timed", "union"])
+def test_ordered_entry_only_with_time_indexed_claims(check):
+    """The junction layer's ordered entry (:meth:`tm.authority_gate.AuthorityGate._after`) is on with
+    the timed check and off with ``union``, whose claims are the hull of a vehicle's slots: wider than
+    the standing box a candidate coming up to a holder's path keeps out of it."""
+    sp = VehicleSpec("a", "car", subsample([[0.0, 0.0], [60.0, 0.0]], 3.0))
+    sim = Cosim(CLASSES, [sp], CosimSettings(controller="authority", tm=TMSettings(check=check)))
+    assert sim.junctions.ordered_entry is (check == "timed")
