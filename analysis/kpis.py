@@ -303,7 +303,8 @@ def run_tables(sim, tripinfo=None) -> tuple[dict, pd.DataFrame, pd.DataFrame]:
         not use), ``junction_tokens`` (tokens handed out), ``junction_given_back`` (at red lights)
         ``junction_withheld`` (requests withheld for want of one) and ``junction_chain_revoked``
         (tokens taken back in the hand-out because a chained zone's was not free,
-        :meth:`tm.authority_gate.AuthorityGate._hand_out`).
+        :meth:`tm.authority_gate.AuthorityGate._hand_out`) and ``junction_ordered`` (tokens taken after
+        holders whose corridors the taker's meets: ordered entry, :meth:`tm.authority_gate.AuthorityGate._after`).
     steps, vehicles : DataFrame
     """
     from controllers.classes import builtin_classes
@@ -341,5 +342,6 @@ def run_tables(sim, tripinfo=None) -> tuple[dict, pd.DataFrame, pd.DataFrame]:
         figures.update(zones=len(gate.zones), zones_ignored=int(getattr(sim, "zones_ignored", 0)),
                        junction_tokens=int(gate.tokens_granted), junction_given_back=int(gate.tokens_given_back),
                        junction_withheld=int(gate.requests_withheld),
-                       junction_chain_revoked=int(getattr(gate, "chain_revoked", 0)))
+                       junction_chain_revoked=int(getattr(gate, "chain_revoked", 0)),
+                       junction_ordered=int(getattr(gate, "ordered_granted", 0)))
     return figures, steps, vehicles
