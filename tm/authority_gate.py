@@ -96,7 +96,7 @@ changes is where they apply:
   exempts the zone's other holders but not the ones a vehicle came after) until each holder lets
   the token go.  It comes up to the conflict while the holders cross it instead of waiting at the
   entry line, and the next one behind it follows.  Every vehicle stands clear of the paths of
-  the holders before it, so the first holder is never blocked by a later one.  Not for a
+  the holders before it, so the first holder never finds a later one standing in its path.  Not for a
   vehicle that wants several zones this round or holds another zone's token: on SUMO's
   ``fkk_in`` (junctions 3-5 m apart) one took ``gneJ21``'s token after ``1_left.0`` with
   ``gneJ220``'s, and ``1_left.0`` waited for it to pass ``gneJ220``: 8 of 114 arrived in 180 s
