@@ -115,33 +115,40 @@ class KeepOut:
                 todo.append((hs, row, lo, hi, near))
         if not todo:
             return out, 0
-        # ... their standing boxes (now, asked for) computed once ...
+        # ... their standing boxes asked for, computed once; then holder by holder, which asked-for
+        # boxes meet the path ...
         every = np.unique(np.concatenate([t[4] for t in todo]))
-        b_lo, b_hi = self.standing_boxes(fleet, every)
+        a_lo, a_hi = self.standing_boxes(fleet, every, ahead=(1,))
         at = np.full(len(ids), -1, dtype=np.intp)
         at[every] = np.arange(len(every))
+        met = []
+        for hs, row, lo, hi, near in todo:
+            q = at[near]  # (n, m): the asked-for standing box against each box of the path
+            hit1 = np.all((a_lo[q][:, 0, None, :] <= hi[None]) & (a_hi[q][:, 0, None, :] >= lo[None]), axis=2)
+            asks = hit1.any(axis=1)  # the asked-for box meets the path somewhere
+            if asks.any():
+                met.append((hs, row, lo, hi, near[asks], hit1[asks]))
+        if not met:
+            return out, 0
+        # ... the current standing boxes of those alone ...
+        askers = np.unique(np.concatenate([t[4] for t in met]))
+        n_lo, n_hi = self.standing_boxes(fleet, askers, ahead=(0,))
+        at[askers] = np.arange(len(askers))
         n_withheld = 0
         by: dict[int, set[int]] = {}  # withheld row -> the holders' rows that withheld it
         # ... then holder by holder (each withheld request's holders noted, :meth:`_mutual`)
-        for hs, row, lo, hi, near in todo:
-            if not len(near):
-                continue
+        for hs, row, lo, hi, near, hit1 in met:
             co = set(pos[v] for v in hs if v in pos and ids[row] not in after.get(v, ()))
-            q = at[near]  # (n, 2, m): the standing boxes now and asked for against each box of the path
-            hits = np.all((b_lo[q][:, :, None, :] <= hi[None, None]) & (b_hi[q][:, :, None, :] >= lo[None, None]),
-                          axis=3)
+            q = at[near]
+            hit0 = np.all((n_lo[q][:, 0, None, :] <= hi[None]) & (n_hi[q][:, 0, None, :] >= lo[None]), axis=2)
+            queue = on_route(fleet, row, near, ahead=1)
             withheld = []
-            asks = hits[:, 1].any(axis=1)  # the asked-for box meets the path somewhere
-            queue = np.zeros(len(near), dtype=bool)
-            queue[asks] = on_route(fleet, row, near[asks], ahead=1)
-            for j, hit, ask, q in zip(near.tolist(), hits, asks.tolist(), queue.tolist()):
-                if not ask:
-                    continue
+            for j, h0, h1, q in zip(near.tolist(), hit0, hit1, queue.tolist()):
                 if q:
-                    hit = hit[:, 1:]  # its queue: the path after the holder's stop point
+                    h0, h1 = h0[1:], h1[1:]  # its queue: the path after the holder's stop point
                 elif j in co:
                     continue
-                if hit[1].any() and not hit[0].any():
+                if h1.any() and not h0.any():
                     withheld.append(j)
             for j in withheld:
                 by.setdefault(j, set()).add(row)
@@ -170,24 +177,26 @@ class KeepOut:
         self.mutual_released += freed
         return freed
 
-    def standing_boxes(self, fleet: JunctionFleet, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """World boxes ``(lo, hi)`` (n, 2, 2) of ``rows`` standing (padded :meth:`AuthorityReach.hold_box`)
-        at their stop points and at the next waypoints."""
-        n = len(rows)
+    def standing_boxes(self, fleet: JunctionFleet, rows: np.ndarray,
+                       ahead: tuple = (0, 1)) -> tuple[np.ndarray, np.ndarray]:
+        """World boxes ``(lo, hi)`` (n, len(ahead), 2) of ``rows`` standing (padded
+        :meth:`AuthorityReach.hold_box`) at their waypoints ``k + a`` for each ``a`` of ``ahead``
+        (the route's last at most): by default at their stop points and at the next waypoints."""
+        n, a_n = len(rows), len(ahead)
         if not n:
-            return np.zeros((0, 2, 2)), np.zeros((0, 2, 2))
+            return np.zeros((0, a_n, 2)), np.zeros((0, a_n, 2))
         routes = [fleet.route(j) for j in rows.tolist()]
         k = np.array([r[2] for r in routes], dtype=np.intp)
         last = np.array([len(r[0]) - 1 for r in routes], dtype=np.intp)
-        idx = np.stack([k, np.minimum(k + 1, last)], axis=1)               # (n, 2)
+        idx = np.stack([np.minimum(k + a, last) for a in ahead], axis=1)   # (n, len(ahead))
         nxt = np.minimum(idx + 1, last[:, None])
-        Wp = np.stack([r[0][i] for r, i in zip(routes, idx)])            # (n, 2, 2)
-        Ha = np.stack([r[1][i] for r, i in zip(routes, idx)]).ravel()    # (2n,)
+        Wp = np.stack([r[0][i] for r, i in zip(routes, idx)])            # (n, len(ahead), 2)
+        Ha = np.stack([r[1][i] for r, i in zip(routes, idx)]).ravel()    # (n len(ahead),)
         Hb = np.stack([r[1][i] for r, i in zip(routes, nxt)]).ravel()
-        pad = fleet.pad_rows(np.repeat(rows, 2), idx.ravel())
-        b_lo, b_hi = np.empty((2 * n, 2)), np.empty((2 * n, 2))
-        fam = np.repeat(np.asarray(fleet.family)[rows], 2)
+        pad = fleet.pad_rows(np.repeat(rows, a_n), idx.ravel())
+        b_lo, b_hi = np.empty((a_n * n, 2)), np.empty((a_n * n, 2))
+        fam = np.repeat(np.asarray(fleet.family)[rows], a_n)
         for c in np.unique(fam).tolist():
             m = fam == c
             b_lo[m], b_hi[m] = self.classes[c].hold_box(pad[m], Ha[m], Hb[m])
-        return Wp + b_lo.reshape(n, 2, 2), Wp + b_hi.reshape(n, 2, 2)
+        return Wp + b_lo.reshape(n, a_n, 2), Wp + b_hi.reshape(n, a_n, 2)
