@@ -118,13 +118,13 @@ class KeepOut:
         # ... their standing boxes asked for, computed once; then holder by holder, which asked-for
         # boxes meet the path ...
         every = np.unique(np.concatenate([t[4] for t in todo]))
-        a_lo, a_hi = self.standing_boxes(fleet, every, ahead=(1,))
+        a_lo, a_hi = self.standing_boxes(fleet, every, ahead=1)
         at = np.full(len(ids), -1, dtype=np.intp)
         at[every] = np.arange(len(every))
         met = []
         for hs, row, lo, hi, near in todo:
             q = at[near]  # (n, m): the asked-for standing box against each box of the path
-            hit1 = np.all((a_lo[q][:, 0, None, :] <= hi[None]) & (a_hi[q][:, 0, None, :] >= lo[None]), axis=2)
+            hit1 = np.all((a_lo[q][:, None, :] <= hi[None]) & (a_hi[q][:, None, :] >= lo[None]), axis=2)
             asks = hit1.any(axis=1)  # the asked-for box meets the path somewhere
             if asks.any():
                 met.append((hs, row, lo, hi, near[asks], hit1[asks]))
@@ -132,15 +132,16 @@ class KeepOut:
             return out, 0
         # ... the current standing boxes of those alone ...
         askers = np.unique(np.concatenate([t[4] for t in met]))
-        n_lo, n_hi = self.standing_boxes(fleet, askers, ahead=(0,))
-        at[askers] = np.arange(len(askers))
+        n_lo, n_hi = self.standing_boxes(fleet, askers, ahead=0)
+        at_now = np.full(len(ids), -1, dtype=np.intp)
+        at_now[askers] = np.arange(len(askers))
         n_withheld = 0
         by: dict[int, set[int]] = {}  # withheld row -> the holders' rows that withheld it
         # ... then holder by holder (each withheld request's holders noted, :meth:`_mutual`)
         for hs, row, lo, hi, near, hit1 in met:
             co = set(pos[v] for v in hs if v in pos and ids[row] not in after.get(v, ()))
-            q = at[near]
-            hit0 = np.all((n_lo[q][:, 0, None, :] <= hi[None]) & (n_hi[q][:, 0, None, :] >= lo[None]), axis=2)
+            q = at_now[near]
+            hit0 = np.all((n_lo[q][:, None, :] <= hi[None]) & (n_hi[q][:, None, :] >= lo[None]), axis=2)
             queue = on_route(fleet, row, near, ahead=1)
             withheld = []
             for j, h0, h1, q in zip(near.tolist(), hit0, hit1, queue.tolist()):
@@ -177,26 +178,25 @@ class KeepOut:
         self.mutual_released += freed
         return freed
 
-    def standing_boxes(self, fleet: JunctionFleet, rows: np.ndarray,
-                       ahead: tuple = (0, 1)) -> tuple[np.ndarray, np.ndarray]:
-        """World boxes ``(lo, hi)`` (n, len(ahead), 2) of ``rows`` standing (padded
-        :meth:`AuthorityReach.hold_box`) at their waypoints ``k + a`` for each ``a`` of ``ahead``
-        (the route's last at most): by default at their stop points and at the next waypoints."""
-        n, a_n = len(rows), len(ahead)
+    def standing_boxes(self, fleet: JunctionFleet, rows: np.ndarray, ahead: int) -> tuple[np.ndarray, np.ndarray]:
+        """World boxes ``(lo, hi)`` (n, 2) of ``rows`` standing (padded :meth:`AuthorityReach.hold_box`)
+        at their waypoints ``k + ahead`` (the route's last at most): ``0`` at their stop points, ``1``
+        at the ones they ask for."""
+        n = len(rows)
         if not n:
-            return np.zeros((0, a_n, 2)), np.zeros((0, a_n, 2))
+            return np.zeros((0, 2)), np.zeros((0, 2))
         routes = [fleet.route(j) for j in rows.tolist()]
         k = np.array([r[2] for r in routes], dtype=np.intp)
         last = np.array([len(r[0]) - 1 for r in routes], dtype=np.intp)
-        idx = np.stack([np.minimum(k + a, last) for a in ahead], axis=1)   # (n, len(ahead))
-        nxt = np.minimum(idx + 1, last[:, None])
-        Wp = np.stack([r[0][i] for r, i in zip(routes, idx)])            # (n, len(ahead), 2)
-        Ha = np.stack([r[1][i] for r, i in zip(routes, idx)]).ravel()    # (n len(ahead),)
-        Hb = np.stack([r[1][i] for r, i in zip(routes, nxt)]).ravel()
-        pad = fleet.pad_rows(np.repeat(rows, a_n), idx.ravel())
-        b_lo, b_hi = np.empty((a_n * n, 2)), np.empty((a_n * n, 2))
-        fam = np.repeat(np.asarray(fleet.family)[rows], a_n)
+        idx = np.minimum(k + ahead, last)
+        nxt = np.minimum(idx + 1, last)
+        Wp = np.array([r[0][i] for r, i in zip(routes, idx.tolist())], dtype=float).reshape(n, 2)
+        Ha = np.array([r[1][i] for r, i in zip(routes, idx.tolist())], dtype=float)
+        Hb = np.array([r[1][i] for r, i in zip(routes, nxt.tolist())], dtype=float)
+        pad = fleet.pad_rows(rows, idx)
+        b_lo, b_hi = np.empty((n, 2)), np.empty((n, 2))
+        fam = np.asarray(fleet.family)[rows]
         for c in np.unique(fam).tolist():
             m = fam == c
             b_lo[m], b_hi[m] = self.classes[c].hold_box(pad[m], Ha[m], Hb[m])
-        return Wp + b_lo.reshape(n, a_n, 2), Wp + b_hi.reshape(n, a_n, 2)
+        return Wp + b_lo, Wp + b_hi
