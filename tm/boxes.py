@@ -14,8 +14,8 @@ import numpy as np
 from controllers.tolerances import GEOMETRY_TOL, SWEEP_MARGIN
 from tm.kernels import sets_meet
 
-__all__ = ["BoxGrid", "GuardIndex", "corridor_hits", "boxes_meet", "polygons_meet", "polygon_sets_meet",
-           "ranges"]
+__all__ = ["BoxGrid", "GuardIndex", "corridor_hits", "box_pairs_meet", "boxes_meet", "polygons_meet",
+           "polygon_sets_meet", "ranges"]
 
 
 def ranges(start: np.ndarray, count: np.ndarray) -> np.ndarray:
@@ -125,9 +125,14 @@ def corridor_hits(zone_q, row_q, first, c_lo, c_hi, zone_b, row_b, b_lo, b_hi) -
     return hits
 
 
+def box_pairs_meet(lo1: np.ndarray, hi1: np.ndarray, lo2: np.ndarray, hi2: np.ndarray) -> np.ndarray:
+    """(n, m) bool: whether box ``(lo1[i], hi1[i])`` meets box ``(lo2[j], hi2[j])`` (touching counts)."""
+    return np.all((lo1[:, None, :] <= hi2[None]) & (hi1[:, None, :] >= lo2[None]), axis=2)
+
+
 def boxes_meet(lo1: np.ndarray, hi1: np.ndarray, lo2: np.ndarray, hi2: np.ndarray) -> bool:
     """Whether any box ``(lo1[i], hi1[i])`` meets any box ``(lo2[j], hi2[j])`` (touching counts)."""
-    return bool(np.any(np.all((lo1[:, None, :] <= hi2[None]) & (hi1[:, None, :] >= lo2[None]), axis=2)))
+    return bool(np.any(box_pairs_meet(lo1, hi1, lo2, hi2)))
 
 
 def polygons_meet(P: np.ndarray, Q: np.ndarray) -> bool:

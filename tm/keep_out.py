@@ -17,9 +17,11 @@ from collections.abc import Callable, Mapping, Sequence
 import numpy as np
 
 from tm.authority_reach import AuthorityReach
+from tm.boxes import box_pairs_meet
 from tm.junctions import JunctionFleet
 
 __all__ = ["KeepOut"]
+
 
 
 class KeepOut:
@@ -118,13 +120,10 @@ class KeepOut:
         # ... their standing boxes asked for, computed once; then holder by holder, which asked-for
         # boxes meet the path ...
         every = np.unique(np.concatenate([t[4] for t in todo]))
-        a_lo, a_hi = self.standing_boxes(fleet, every, ahead=1)
-        at = np.full(len(ids), -1, dtype=np.intp)
-        at[every] = np.arange(len(every))
+        a_lo, a_hi = self._standing_by_row(fleet, every, ahead=1)
         met = []
         for hs, row, lo, hi, near in todo:
-            q = at[near]  # (n, m): the asked-for standing box against each box of the path
-            hit1 = np.all((a_lo[q][:, None, :] <= hi[None]) & (a_hi[q][:, None, :] >= lo[None]), axis=2)
+            hit1 = box_pairs_meet(a_lo[near], a_hi[near], lo, hi)  # the asked-for box against each box of the path
             asks = hit1.any(axis=1)  # the asked-for box meets the path somewhere
             if asks.any():
                 met.append((hs, row, lo, hi, near[asks], hit1[asks]))
@@ -132,16 +131,13 @@ class KeepOut:
             return out, 0
         # ... the current standing boxes of those alone ...
         askers = np.unique(np.concatenate([t[4] for t in met]))
-        n_lo, n_hi = self.standing_boxes(fleet, askers, ahead=0)
-        at_now = np.full(len(ids), -1, dtype=np.intp)
-        at_now[askers] = np.arange(len(askers))
+        n_lo, n_hi = self._standing_by_row(fleet, askers, ahead=0)
         n_withheld = 0
         by: dict[int, set[int]] = {}  # withheld row -> the holders' rows that withheld it
         # ... then holder by holder (each withheld request's holders noted, :meth:`_mutual`)
         for hs, row, lo, hi, near, hit1 in met:
             co = set(pos[v] for v in hs if v in pos and ids[row] not in after.get(v, ()))
-            q = at_now[near]
-            hit0 = np.all((n_lo[q][:, None, :] <= hi[None]) & (n_hi[q][:, None, :] >= lo[None]), axis=2)
+            hit0 = box_pairs_meet(n_lo[near], n_hi[near], lo, hi)
             queue = on_route(fleet, row, near, ahead=1)
             withheld = []
             for j, h0, h1, q in zip(near.tolist(), hit0, hit1, queue.tolist()):
@@ -177,6 +173,13 @@ class KeepOut:
                 freed += 1
         self.mutual_released += freed
         return freed
+
+    def _standing_by_row(self, fleet: JunctionFleet, rows: np.ndarray, ahead: int) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`standing_boxes` of ``rows`` placed at their rows of the fleet, (len(fleet.ids), 2) each
+        (NaN at the other rows)."""
+        lo, hi = np.full((2, len(fleet.ids), 2), np.nan)
+        lo[rows], hi[rows] = self.standing_boxes(fleet, rows, ahead)
+        return lo, hi
 
     def standing_boxes(self, fleet: JunctionFleet, rows: np.ndarray, ahead: int) -> tuple[np.ndarray, np.ndarray]:
         """World boxes ``(lo, hi)`` (n, 2) of ``rows`` standing (padded :meth:`AuthorityReach.hold_box`)
