@@ -546,7 +546,11 @@ class Cosim:
             # any index with x in T^l is a valid tube: where a speed bound binds keep the slack it
             # needs (still at most l - 1: the index strictly decreases, claims stay monotone)
             cap_next, lim = g.speed_caps(s.Ts)
-            keep = np.minimum(g.l - 1, l_new + g.slack(s.Ts, 0, cap_next))
+            slack = g.slack(s.Ts, 0, cap_next)
+            keep = np.minimum(g.l - 1, l_new + slack)
+            # no room left: the index falls by the one level a step the invariant allows while a
+            # bound binds (the next request is then made whatever the lead: _Group.request)
+            g.pinned = (g.l > 1) & (slack > 0) & (l_new + slack >= g.l - 1)
             l_new = np.where(g.l > 0, np.maximum(l_new, keep), l_new)
             speed = np.linalg.norm(g.X[:, 2:4], axis=1)
             np.maximum(g.excess, speed - lim, out=g.excess)

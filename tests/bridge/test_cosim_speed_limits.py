@@ -14,15 +14,23 @@ from analysis.kpis import SPEED_LIMIT_KPI_TOL as TOL  # noqa: E402  (d̄ and the
 
 
 @pytest.mark.parametrize("controller,slow,vclass", [("authority", 5.0, "car"), ("authority", 3.0, "car"),
-                                                     ("paper", 5.0, "car"), ("authority", 5.0, "truck")])
+                                                     ("paper", 5.0, "car"), ("authority", 5.0, "truck"),
+                                                     ("authority", 6.51, "truck"), ("authority", 6.51, "bus")])
 def test_speed_at_or_below_a_lower_limit_ahead(controller, slow, vclass):
+    """6.51 m/s is the speed of ``grid``'s turning junction lanes.  A bus or truck, braking at its
+    comfort deceleration (1.2 m/s^2) along the look-ahead, made no request while its lead to its
+    stop point stayed above the one its falling bound asks for, and the tube index, falling a level
+    a step towards that far stop point, drove it over the limit (bus 2.84 m/s, truck 1.07 m/s over,
+    measured before the request rule of ``_Group.pinned``)."""
     prof, fig = run(controller, slow, vclass=vclass, disturbance="adversarial" if vclass == "car" else "random")
     assert fig["invariant_violations"] == 0
     assert fig["speed_limit_excess_max"] <= TOL
     assert fig["travel_time_s"] is not None and fig["travel_time_s"] >= fig["free_flow_s"]
     if controller == "authority":
         assert fig["median_speed_in_zone"] > slow - 0.1  # it drives at the limit, not far below
-        assert fig["max_speed"] > 13.0                    # and at the class bound before and after
+        # and near the class bound (13.89) before and after; the bus, slower to accelerate, starts
+        # braking at 1.2 m/s^2 ~60 m before the stretch and peaks at 12.5 m/s before it (measured)
+        assert fig["max_speed"] > (12.0 if vclass == "bus" else 13.0)
 
 
 def test_the_kpi_fires_without_the_bound():
@@ -46,6 +54,20 @@ def test_any_slow_stretch_keeps_the_tube(controller, slow, start, span, seed):
                  disturbance="adversarial")
     assert fig["invariant_violations"] == 0 and fig["tube_escapes"] == 0 and fig["constraint_violations"] == 0
     assert fig["travel_time_s"] is not None and fig["travel_time_s"] >= fig["free_flow_s"]
+
+
+@hsettings(max_examples=6, deadline=None)
+@given(vclass=st.sampled_from(["car", "bus", "truck"]), slow=st.floats(4.0, 13.0),
+       start=st.floats(30.0, 250.0), span=st.floats(6.0, 80.0), seed=st.integers(0, 10 ** 6))
+def test_any_class_keeps_any_lower_limit_in_authority_mode(vclass, slow, start, span, seed):
+    """Movement authority, any class, any stretch, any limit in [4, 13] m/s, adversarial
+    disturbance: the speed stays within TOL of the limit under the front (the request rule asks
+    again when the tube has no room left while the bound binds; the paper's short tubes force a
+    floor of their own, Known limits), and the tube holds."""
+    _, fig = run("authority", slow, zone=(start, start + span), length=320.0, vclass=vclass, seed=seed,
+                 disturbance="adversarial")
+    assert fig["speed_limit_excess_max"] <= TOL
+    assert fig["invariant_violations"] == 0 and fig["tube_escapes"] == 0 and fig["constraint_violations"] == 0
 
 
 def test_curve_speed_holds_in_authority_mode():
