@@ -323,7 +323,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="obey (default): lanes' speed limits bound the vehicles' speed (with look-ahead); "
                         "ignore: only the class bound (the KPI speed_limit_excess_max still measures them)")
     r.add_argument("--lat-accel", type=float, default=None, metavar="A",
-                   help="authority mode: curve speed sqrt(A / curvature), A in m/s^2 (default 2.0; 0: off)")
+                   help="authority mode: curve speed sqrt(A / curvature), A in m/s^2 (default: the network's "
+                        "limitTurnSpeed, the lateral acceleration netconvert built its turn speeds with, "
+                        "5.5 unless set otherwise; 2.0 where the network records none; 0: off)")
     r.add_argument("--check", choices=["union", "timed"], default=None)
     r.add_argument("--switching", choices=["terminal", "early"], default=None)
     r.add_argument("--disturbance", choices=["random", "adversarial", "none"], default=None)

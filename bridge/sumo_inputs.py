@@ -26,7 +26,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterable, Sequence
 
-__all__ = ["InputError", "PreparedInputs", "parse_xml", "prepare_inputs", "headless_config", "OUTPUT_ELEMENTS",
+__all__ = ["InputError", "PreparedInputs", "parse_xml", "net_turn_accel", "prepare_inputs", "headless_config", "OUTPUT_ELEMENTS",
            "DEMAND_ELEMENTS", "INPUT_OPTIONS"]
 
 #: Additional-file elements that only write outputs (dropped from muvsim's copies).
@@ -65,6 +65,40 @@ def parse_xml(path: str | os.PathLike) -> ET.ElementTree:
         raise InputError(f"{p}: cannot be read: {getattr(exc, 'strerror', None) or exc}") from None
     except ET.ParseError as exc:
         raise InputError(f"{p}: not well-formed XML ({exc}); SUMO cannot load it") from None
+
+
+def net_turn_accel(path: str | os.PathLike) -> float | None:
+    """The lateral acceleration (m/s^2) netconvert limited the network's turning junction lanes'
+    speeds with: the ``limitTurnSpeed`` attribute of the ``<net>`` element (netconvert's option
+    ``junctions.limit-turn-speed``, 5.5 by default; SUMO's drivers drive those lanes' speeds).
+    None when the network records none (written by netconvert since SUMO 1.2) or a value <= 0
+    (turn speeds not limited).  Reads the first element only.
+
+    Raises
+    ------
+    InputError
+        Missing, unreadable or not well-formed (the message names the file); or an attribute that
+        is not a number (the message names it and the file).
+    """
+    p = Path(path)
+    try:
+        with open(p, "rb") as fh:
+            gz = fh.read(2) == b"\x1f\x8b"
+        with (gzip.open(p, "rb") if gz else open(p, "rb")) as fh:
+            root = next(el for _, el in ET.iterparse(fh, events=("start",)))
+    except (OSError, EOFError) as exc:
+        raise InputError(f"{p}: cannot be read: {getattr(exc, 'strerror', None) or exc}") from None
+    except (ET.ParseError, StopIteration) as exc:
+        raise InputError(f"{p}: not well-formed XML ({exc}); SUMO cannot load it") from None
+    raw = root.get("limitTurnSpeed")
+    if raw is None:
+        return None
+    try:
+        a = float(raw)
+    except ValueError:
+        raise InputError(f"{p}: <{root.tag}> limitTurnSpeed={raw!r} is not a number (m/s^2; "
+                         f"netconvert writes its junctions.limit-turn-speed there)") from None
+    return a if a > 0 and a == a and a != float("inf") else None
 
 
 @dataclass(frozen=True)

@@ -35,7 +35,7 @@ from bridge.signals import LinkSlots, route_stop_lines
 from bridge.vehicle_stops import plan_stops
 from bridge.stopping import RunLimit, route_file_departures, run_limit, stop_reason
 from bridge.sumo_adapter import SumoAdapter, SumoError
-from bridge.sumo_inputs import InputError, headless_config, parse_xml, prepare_inputs
+from bridge.sumo_inputs import InputError, headless_config, net_turn_accel, parse_xml, prepare_inputs
 from bridge.sumo_pedestrians import read_personinfo, read_persons, walk_regions
 from bridge.waypoints import RouteError, load_net, trim_start, trim_start_index
 from controllers.classes import VehicleClass, VTypeParams, builtin_classes, vtype_class, vtype_speed_cap
@@ -603,6 +603,8 @@ def run_sumo(target: str, out: Path, opts, observers_extra: list | None = None) 
             switching = opts.switching or scenario.switching
             disturbance = opts.disturbance or scenario.disturbance
         signals = SignalSettings(mode=getattr(opts, "signals", None) or "obey")
+        # curve speeds: the lateral acceleration the network's turn speeds were built with, unless given
+        speed = SpeedSettings.from_options(opts, net_turn_accel(net))
         summary.update(seed=seed, begin_s=begin,
                        options=dict(tm=tm, check=check, switching=switching, disturbance=disturbance,
                                     solver=opts.solver, duration_s=opts.duration, signals=signals.mode,
@@ -611,8 +613,7 @@ def run_sumo(target: str, out: Path, opts, observers_extra: list | None = None) 
                                     frame=getattr(opts, "frame", None) or "auto",
                                     arrival=getattr(opts, "arrival", None) or "stop",
                                     speed_limits=getattr(opts, "speed_limits", None) or "obey",
-                                    lat_accel=SpeedSettings.from_options(opts).lat_accel
-                                    if SpeedSettings.from_options(opts).curves else 0.0))
+                                    lat_accel=speed.lat_accel if speed.curves else 0.0))
         _write_summary(out, summary)
         tripinfo = out / "tripinfo.xml"
         inputs = None
@@ -704,7 +705,7 @@ def run_sumo(target: str, out: Path, opts, observers_extra: list | None = None) 
         settings = CosimSettings(tm=TMSettings(policy=tm, check=check, seed=seed), switching=switching,
                                  disturbance=disturbance, solver=opts.solver, seed=seed, duration_s=duration,
                                  signals=signals, controller=getattr(opts, "controller", "paper"),
-                                 speed=SpeedSettings.from_options(opts),
+                                 speed=speed,
                                  claim_cache=summary["options"]["claim_cache"] == "on",
                                  frame=summary["options"]["frame"])
         observers = [HaltCounter()] + observers_for(out, getattr(opts, "log", None) or "none",

@@ -47,9 +47,10 @@ class SpeedSettings:
         Bound the speed by ``sqrt(lat_accel / kappa)`` (``authority`` mode only: the paper's
         sets hold ~5 m/s, below any curve speed of a road).
     lat_accel : float
-        Comfortable lateral acceleration ``a_lat`` (m/s^2, 0 < a_lat <= 10) of the curve speed;
-        2.0 is the usual comfort figure for cars (buses and trucks, slower by their input
-        bounds, share it).
+        Lateral acceleration ``a_lat`` (m/s^2, 0 < a_lat <= 10) of the curve speed; 2.0 (the
+        usual comfort figure for cars; buses and trucks share it) where nothing else is known.
+        A run on a SUMO network takes the network's own (:meth:`from_options`): the one its turn
+        speeds were built with, which SUMO's drivers drive.
     curve_window_m : float
         Half-width ``w`` (m, > 0) of the arc window over which curvature is measured.
     slack_steps : int
@@ -85,14 +86,18 @@ class SpeedSettings:
             raise SettingsError(f"SpeedSettings.curve_window_m: must be a distance > 0 m, got {w!r}")
 
     @classmethod
-    def from_options(cls, opts) -> "SpeedSettings":
+    def from_options(cls, opts, network_lat_accel: float | None = None) -> "SpeedSettings":
         """From command-line options ``speed_limits`` (``obey`` / ``ignore``) and ``lat_accel``
-        (m/s^2; 0 turns curve speeds off); absent options take the defaults."""
+        (m/s^2; 0 turns curve speeds off).  Without ``lat_accel``: ``network_lat_accel``, the
+        lateral acceleration the network's own turn speeds were built with (a SUMO network's
+        ``limitTurnSpeed``, :func:`bridge.sumo_inputs.net_turn_accel`; SUMO's drivers drive
+        those speeds), else the class default (2.0)."""
         mode = getattr(opts, "speed_limits", None) or "obey"
         if mode not in ("obey", "ignore"):
             raise SettingsError(f"--speed-limits: must be 'obey' or 'ignore', got {mode!r}")
         a = getattr(opts, "lat_accel", None)
-        a = cls.lat_accel if a is None else a
+        if a is None:  # (a network's value past the valid range is taken at its end)
+            a = min(float(network_lat_accel), 10.0) if network_lat_accel else cls.lat_accel
         return cls(lane_limits=mode == "obey", curves=a > 0, lat_accel=a if a > 0 else cls.lat_accel)
 
 

@@ -94,3 +94,43 @@ def test_straight_connections_of_sumos_cross_are_driven_at_the_lane_speed(tmp_pa
     assert s["collisions_sumo"] == 0 and s["tube_escapes"] == 0
     v = pd.read_csv(out / "vehicles.csv").set_index("id")
     assert v.loc["v", "arrival_s"] > 0 and v.loc["v", "delay_s"] < 4.0
+
+
+@pytest.fixture(scope="module")
+def corner(tmp_path_factory):
+    """An L-shaped road (a-b-c, a left turn at b, 13.89 m/s, one lane), built by netconvert at its
+    default turn acceleration and at 3 m/s^2, with one car driving it."""
+    d = tmp_path_factory.mktemp("corner")
+    (d / "n.nod.xml").write_text('<nodes><node id="a" x="0" y="0"/><node id="b" x="150" y="0"/>'
+                                 '<node id="c" x="150" y="150"/></nodes>')
+    (d / "n.edg.xml").write_text('<edges><edge id="ab" from="a" to="b" speed="13.89"/>'
+                                 '<edge id="bc" from="b" to="c" speed="13.89"/></edges>')
+    (d / "r.rou.xml").write_text('<routes><vehicle id="v" depart="0"><route edges="ab bc"/></vehicle></routes>')
+    cfgs = {}
+    for name, extra in (("default", []), ("three", ["--junctions.limit-turn-speed", "3"])):
+        net = d / f"{name}.net.xml"
+        run_tool([binary("netconvert"), "-n", d / "n.nod.xml", "-e", d / "n.edg.xml", "-o", net, *extra],
+                 what="netconvert")
+        cfgs[name] = d / f"{name}.sumocfg"
+        cfgs[name].write_text(f'<configuration><input><net-file value="{net}"/>'
+                              f'<route-files value="{d / "r.rou.xml"}"/></input></configuration>')
+    return cfgs
+
+
+def test_curve_speed_takes_the_networks_turn_acceleration(corner, tmp_path):
+    """Without ``--lat-accel`` the curve speed uses the lateral acceleration the network's turn
+    speeds were built with (``limitTurnSpeed``: netconvert's 5.5 m/s^2 by default, 3 when built so),
+    which SUMO's drivers drive; ``--lat-accel`` still wins.  The car is through the corner sooner
+    the larger it is, keeps every lane limit (the junction lane's included), 0 SUMO collisions."""
+    runs = {}
+    for label, cfg, extra in (("net55", corner["default"], []), ("net3", corner["three"], []),
+                              ("opt2", corner["default"], ["--lat-accel", "2"])):
+        out = tmp_path / label
+        rc = main(["run", str(cfg), "--out", str(out), "--quiet", "--log", "none", "--duration", "90", *extra])
+        s = json.loads((out / "summary.json").read_text())
+        assert rc == 0 and s["complete"] and s["safe"], s.get("error") or s["safety_violations"]
+        assert s["collisions_sumo"] == 0 and s["speed_limit_excess_max"] <= SPEED_LIMIT_KPI_TOL
+        runs[label] = (s["options"]["lat_accel"], pd.read_csv(out / "vehicles.csv").set_index("id").loc["v"])
+    assert [runs[k][0] for k in ("net55", "net3", "opt2")] == [5.5, 3.0, 2.0]
+    t = {k: r[1]["travel_time_s"] for k, r in runs.items()}
+    assert t["net55"] < t["net3"] < t["opt2"], t

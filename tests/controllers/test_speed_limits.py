@@ -153,3 +153,17 @@ def test_settings_and_bad_limits_are_refused():
     with pytest.raises(ValueError, match="one limit per waypoint"):
         route_speeds(W, np.array([5.0, 5.0]), 13.89, 2.5)
     assert tol.SPEED_BOUND_TOL > 0
+
+
+def test_lat_accel_comes_from_the_option_then_the_network_then_the_default():
+    """``--lat-accel`` wins (0: curves off); without it the network's own turn acceleration (a
+    SUMO network's ``limitTurnSpeed``), taken at the valid range's end past it; without either 2.0."""
+    from types import SimpleNamespace as NS
+
+    assert SpeedSettings.from_options(NS(lat_accel=None), 5.5).lat_accel == 5.5
+    assert SpeedSettings.from_options(NS(lat_accel=None), None).lat_accel == SpeedSettings.lat_accel == 2.0
+    assert SpeedSettings.from_options(NS(lat_accel=3.0), 5.5).lat_accel == 3.0
+    off = SpeedSettings.from_options(NS(lat_accel=0.0), 5.5)
+    assert not off.curves
+    assert SpeedSettings.from_options(NS(lat_accel=None), 25.0).lat_accel == 10.0
+    assert SpeedSettings.from_options(NS()).lat_accel == 2.0  # options without the field at all
