@@ -252,7 +252,12 @@ class _Group:
             # its tube has no room left while a bound binds: it asks again, whatever its lead (else
             # the index, falling a level a step towards a stop point far ahead, drives it over the
             # bound: a lone bus 2.84 m/s over a 6.51 m/s stretch, tests/bridge/test_cosim_speed_limits.py)
-            may |= self.pinned & inside
+            soon = self.pinned.copy()
+            if soon.any():  # ... and within slack_steps levels it would force the vehicle over the bound
+                r = np.flatnonzero(soon)
+                soon[r] = ~self.ctl.cap_admits(self.X[r], cen[r], hd[r] if hd is not None else None,
+                                               np.maximum(self.l[r] - 1 - self.slack_steps, 1), self.cap[r])
+            may |= soon & inside
         may &= has
         may &= (want <= self.ctl.N) | (self.l == 0)
         lp = np.where(inside, np.minimum(want, self.ctl.N), lp)
