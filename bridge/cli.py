@@ -264,6 +264,20 @@ def _duration(text: str) -> float:
     return v
 
 
+def _lat_accel(text: str) -> float | str:
+    """``--lat-accel``: m/s^2 (a number >= 0; 0 turns curve speeds off), or ``net``."""
+    if text.strip().lower() == "net":
+        return "net"
+    try:
+        v = float(text)
+    except ValueError:
+        v = float("nan")
+    if not 0 <= v <= 10:
+        raise argparse.ArgumentTypeError(f"must be a lateral acceleration in [0, 10] m/s^2 (0: no curve speeds) "
+                                         f"or 'net' (the network's own limitTurnSpeed), got {text!r}")
+    return v
+
+
 DURATION_HELP = ("stop after S simulated seconds, or earlier once every vehicle of the demand has arrived. "
                  "Default: until every vehicle has arrived, at most 3 x the departure window (the last "
                  "requested departure, at least 60 s; 900 s for grid); the closing table says why the run "
@@ -322,10 +336,10 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--speed-limits", choices=["obey", "ignore"], default="obey",
                    help="obey (default): lanes' speed limits bound the vehicles' speed (with look-ahead); "
                         "ignore: only the class bound (the KPI speed_limit_excess_max still measures them)")
-    r.add_argument("--lat-accel", type=float, default=None, metavar="A",
-                   help="authority mode: curve speed sqrt(A / curvature), A in m/s^2 (default: the network's "
-                        "limitTurnSpeed, the lateral acceleration netconvert built its turn speeds with, "
-                        "5.5 unless set otherwise; 2.0 where the network records none; 0: off)")
+    r.add_argument("--lat-accel", type=_lat_accel, default=None, metavar="A",
+                   help="authority mode: curve speed sqrt(A / curvature), A in m/s^2 (default 2.0; 0: off); "
+                        "'net': the network's limitTurnSpeed, the lateral acceleration netconvert built its "
+                        "turn speeds with (5.5 unless set otherwise; 2.0 where the network records none)")
     r.add_argument("--check", choices=["union", "timed"], default=None)
     r.add_argument("--switching", choices=["terminal", "early"], default=None)
     r.add_argument("--disturbance", choices=["random", "adversarial", "none"], default=None)

@@ -60,6 +60,16 @@ def test_out_is_a_file(tmp_path, capsys):
                                   f"(created if missing)"]
 
 
+@pytest.mark.parametrize("bad", ["fast", "-1", "11", "nan"])
+def test_lat_accel_names_what_is_valid(bad, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["run", "grid", "--lat-accel", bad, "--quiet"])
+    assert exc.value.code == 2
+    assert _err_lines(capsys)[-1] == (f"muvsim run: error: argument --lat-accel: must be a lateral acceleration "
+                                      f"in [0, 10] m/s^2 (0: no curve speeds) or 'net' (the network's own "
+                                      f"limitTurnSpeed), got {bad!r}")
+
+
 def test_out_under_a_file(tmp_path, capsys):
     f = tmp_path / "afile"
     f.write_text("x")

@@ -118,13 +118,13 @@ def corner(tmp_path_factory):
 
 
 def test_curve_speed_takes_the_networks_turn_acceleration(corner, tmp_path):
-    """Without ``--lat-accel`` the curve speed uses the lateral acceleration the network's turn
-    speeds were built with (``limitTurnSpeed``: netconvert's 5.5 m/s^2 by default, 3 when built so),
-    which SUMO's drivers drive; ``--lat-accel`` still wins.  The car is through the corner sooner
-    the larger it is, keeps every lane limit (the junction lane's included), 0 SUMO collisions."""
+    """``--lat-accel net``: the curve speed uses the lateral acceleration the network's turn speeds
+    were built with (``limitTurnSpeed``: netconvert's 5.5 m/s^2 by default, 3 when built so), which
+    SUMO's drivers drive; without the option 2.0.  The car is through the corner sooner the larger
+    it is, keeps every lane limit (the junction lane's included), 0 SUMO collisions."""
     runs = {}
-    for label, cfg, extra in (("net55", corner["default"], []), ("net3", corner["three"], []),
-                              ("opt2", corner["default"], ["--lat-accel", "2"])):
+    for label, cfg, extra in (("net55", corner["default"], ["--lat-accel", "net"]),
+                              ("net3", corner["three"], ["--lat-accel", "NET"]), ("opt2", corner["default"], [])):
         out = tmp_path / label
         rc = main(["run", str(cfg), "--out", str(out), "--quiet", "--log", "none", "--duration", "90", *extra])
         s = json.loads((out / "summary.json").read_text())

@@ -155,15 +155,16 @@ def test_settings_and_bad_limits_are_refused():
     assert tol.SPEED_BOUND_TOL > 0
 
 
-def test_lat_accel_comes_from_the_option_then_the_network_then_the_default():
-    """``--lat-accel`` wins (0: curves off); without it the network's own turn acceleration (a
-    SUMO network's ``limitTurnSpeed``), taken at the valid range's end past it; without either 2.0."""
+def test_lat_accel_from_the_option_the_network_or_the_default():
+    """``--lat-accel A`` is A (0: curves off); ``--lat-accel net`` the network's own turn
+    acceleration (a SUMO network's ``limitTurnSpeed``, taken at the valid range's end past it), the
+    default 2.0 where it records none; without the option 2.0 whatever the network says."""
     from types import SimpleNamespace as NS
 
-    assert SpeedSettings.from_options(NS(lat_accel=None), 5.5).lat_accel == 5.5
-    assert SpeedSettings.from_options(NS(lat_accel=None), None).lat_accel == SpeedSettings.lat_accel == 2.0
+    assert SpeedSettings.from_options(NS(lat_accel="net"), 5.5).lat_accel == 5.5
+    assert SpeedSettings.from_options(NS(lat_accel="net"), None).lat_accel == SpeedSettings.lat_accel == 2.0
+    assert SpeedSettings.from_options(NS(lat_accel="net"), 25.0).lat_accel == 10.0
+    assert SpeedSettings.from_options(NS(lat_accel=None), 5.5).lat_accel == 2.0
     assert SpeedSettings.from_options(NS(lat_accel=3.0), 5.5).lat_accel == 3.0
-    off = SpeedSettings.from_options(NS(lat_accel=0.0), 5.5)
-    assert not off.curves
-    assert SpeedSettings.from_options(NS(lat_accel=None), 25.0).lat_accel == 10.0
+    assert not SpeedSettings.from_options(NS(lat_accel=0.0), 5.5).curves
     assert SpeedSettings.from_options(NS()).lat_accel == 2.0  # options without the field at all
