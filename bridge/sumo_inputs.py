@@ -20,14 +20,15 @@ Gzipped files (``.gz``) are read transparently and written uncompressed.
 from __future__ import annotations
 
 import gzip
+import math
 import os
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterable, Sequence
 
-__all__ = ["InputError", "PreparedInputs", "parse_xml", "net_turn_accel", "prepare_inputs", "headless_config", "OUTPUT_ELEMENTS",
-           "DEMAND_ELEMENTS", "INPUT_OPTIONS"]
+__all__ = ["InputError", "PreparedInputs", "parse_xml", "net_turn_accel", "prepare_inputs", "headless_config",
+           "OUTPUT_ELEMENTS", "DEMAND_ELEMENTS", "INPUT_OPTIONS"]
 
 #: Additional-file elements that only write outputs (dropped from muvsim's copies).
 OUTPUT_ELEMENTS = frozenset({
@@ -98,7 +99,7 @@ def net_turn_accel(path: str | os.PathLike) -> float | None:
     except ValueError:
         raise InputError(f"{p}: <{root.tag}> limitTurnSpeed={raw!r} is not a number (m/s^2; "
                          f"netconvert writes its junctions.limit-turn-speed there)") from None
-    return a if a > 0 and a == a and a != float("inf") else None
+    return a if math.isfinite(a) and a > 0 else None
 
 
 @dataclass(frozen=True)

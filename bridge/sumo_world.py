@@ -603,8 +603,9 @@ def run_sumo(target: str, out: Path, opts, observers_extra: list | None = None) 
             switching = opts.switching or scenario.switching
             disturbance = opts.disturbance or scenario.disturbance
         signals = SignalSettings(mode=getattr(opts, "signals", None) or "obey")
-        # curve speeds: the lateral acceleration the network's turn speeds were built with, unless given
-        speed = SpeedSettings.from_options(opts, net_turn_accel(net))
+        # curve speeds; --lat-accel net: the lateral acceleration the network's turn speeds were built with
+        speed = SpeedSettings.from_options(
+            opts, net_turn_accel(net) if getattr(opts, "lat_accel", None) == "net" else None)
         summary.update(seed=seed, begin_s=begin,
                        options=dict(tm=tm, check=check, switching=switching, disturbance=disturbance,
                                     solver=opts.solver, duration_s=opts.duration, signals=signals.mode,
