@@ -144,6 +144,13 @@ class JunctionFleet:
     pads: object = None
     claim_polygons: object = None
 
+    def __post_init__(self) -> None:
+        # each row's part and place in it, for :meth:`route` (asked for millions of times a run)
+        at = []
+        for W, H, k in self.parts:
+            at.extend((W, H, k, i) for i in range(len(k)))
+        object.__setattr__(self, "_at", at)
+
     def pad(self, row: int, idx: np.ndarray) -> np.ndarray:
         """The padding (m, 4) ``(back, front, right, left)`` of row ``row`` at waypoints ``idx``
         (zeros without :attr:`pads`)."""
@@ -166,6 +173,9 @@ class JunctionFleet:
 
     def route(self, row: int) -> tuple[np.ndarray, np.ndarray, int]:
         """``(waypoints, headings, current waypoint index)`` of fleet row ``row``."""
+        if 0 <= row < len(self._at):
+            W, H, k, i = self._at[row]
+            return W[i], H[i], int(k[i])
         p = row
         for W, H, k in self.parts:
             if p < len(k):

@@ -252,3 +252,22 @@ def test_bad_zones_and_families_are_named():
         Zone("J3", (0.0, 0.0, 0.0), (1.0, 1.0, 1.0))
     with pytest.raises(ValueError, match="ClassReach.of: need the position sets P\\^0 .. P\\^N with N >= 1"):
         ClassReach.of([np.zeros((4, 2))], 4.5, 1.8, True)
+
+
+def test_fleet_route_reads_each_row_of_every_part():
+    """:meth:`JunctionFleet.route` finds a row in its part (rows count on across the parts), reads
+    the current waypoint as the part's index array holds it when asked (the loop moves it on in
+    place), and refuses a row beyond the fleet."""
+    W = [np.full((3, 2), float(i)) for i in range(5)]
+    H = [np.full(3, 0.1 * i) for i in range(5)]
+    k1, k2 = np.array([0, 1]), np.array([2, 0, 1])
+    fleet = JunctionFleet([f"v{i}" for i in range(5)], np.array(["car"] * 5), np.zeros((5, 2)), np.zeros((5, 2)),
+                          ((W[:2], H[:2], k1), (W[2:], H[2:], k2)))
+    for row, k in enumerate([0, 1, 2, 0, 1]):
+        w, h, kk = fleet.route(row)
+        assert w is W[row] and h is H[row] and kk == k and type(kk) is int
+    k2[1] += 1
+    assert fleet.route(3)[2] == 1
+    assert fleet.route(np.int64(4))[0] is W[4]
+    with pytest.raises(IndexError):
+        fleet.route(5)
