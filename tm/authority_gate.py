@@ -435,7 +435,7 @@ class AuthorityGate(JunctionGate):
         after: dict[str, set[str]] = {}
         for (_, v), hs in self.after.items():
             after.setdefault(v, set()).update(hs)
-        out, n = self.keep_out.apply(fleet, req, self.holders, self.paths.wide_paths, self.paths.on_route, after)
+        out, n = self.keep_out.apply(fleet, req, self.holders, self.paths.wide_paths, self.paths.on_routes, after)
         self.requests_withheld += n
         self.wide_withheld += n
         return out

@@ -15,7 +15,7 @@ from collections.abc import Mapping
 import numpy as np
 
 from tm.authority_reach import AuthorityReach
-from tm.boxes import boxes_meet
+from tm.boxes import boxes_meet, ranges
 from tm.guard_spans import GuardSpans
 from tm.junctions import JunctionFleet
 
@@ -157,16 +157,31 @@ class GatePaths:
     def on_route(self, fleet: JunctionFleet, row: int, j: np.ndarray, ahead: int = 0) -> np.ndarray:
         """Which rows ``j`` have their requested stop point (``k + ahead``) on row ``row``'s route
         (within ``0.6 δ`` of one of its waypoints: the same lanes, ahead of it or behind)."""
-        W = fleet.route(row)[0]
+        j = np.asarray(j, dtype=np.intp).reshape(-1)
+        return self.on_routes(fleet, np.full(len(j), row, dtype=np.intp), j, ahead)
+
+    def on_routes(self, fleet: JunctionFleet, rows: np.ndarray, j: np.ndarray, ahead: int = 0) -> np.ndarray:
+        """:meth:`on_route` of pairs: whether row ``j[i]``'s requested stop point (``k + ahead``) lies
+        on row ``rows[i]``'s route (within ``0.6 δ`` of one of its waypoints), all pairs at once
+        (each route's waypoints gathered once)."""
+        rows = np.asarray(rows, dtype=np.intp).reshape(-1)
+        j = np.asarray(j, dtype=np.intp).reshape(-1)
         if not len(j):
             return np.zeros(0, dtype=bool)
-        pts, tol = [], []
-        for jj in j.tolist():
+        pts, tol = np.empty((len(j), 2)), np.empty(len(j))
+        for n, jj in enumerate(j.tolist()):
             Wj, _, kj = fleet.route(jj)
-            pts.append(Wj[min(kj + ahead, len(Wj) - 1)])
-            tol.append(0.6 * self.classes[fleet.family[jj]].delta)
-        d = np.hypot(W[:, None, 0] - np.array(pts)[None, :, 0], W[:, None, 1] - np.array(pts)[None, :, 1])
-        return d.min(axis=0) <= np.array(tol)
+            pts[n] = Wj[min(kj + ahead, len(Wj) - 1)]
+            tol[n] = 0.6 * self.classes[fleet.family[jj]].delta
+        u, inv = np.unique(rows, return_inverse=True)
+        Ws = [fleet.route(r)[0] for r in u.tolist()]
+        cnt = np.array([len(W) for W in Ws], dtype=np.intp)
+        W = np.concatenate(Ws)
+        n_w = cnt[inv]  # each pair's route length, and its waypoints in W
+        p = np.repeat(np.arange(len(j)), n_w)
+        w = ranges((np.cumsum(cnt) - cnt)[inv], n_w)
+        d = np.hypot(W[w, 0] - pts[p, 0], W[w, 1] - pts[p, 1])
+        return np.minimum.reduceat(d, np.cumsum(n_w) - n_w) <= tol
 
     def follows(self, fleet: JunctionFleet, pos: dict, row: int, z: int, leaders: list) -> bool:
         """A queue through the junction: row ``row`` may take zone ``z``'s token although its

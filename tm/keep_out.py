@@ -17,7 +17,7 @@ from collections.abc import Callable, Mapping, Sequence
 import numpy as np
 
 from tm.authority_reach import AuthorityReach
-from tm.boxes import box_pairs_meet
+from tm.boxes import ranges
 from tm.junctions import JunctionFleet
 
 __all__ = ["KeepOut"]
@@ -48,7 +48,7 @@ class KeepOut:
                           default=0.0) + 10.0
 
     def apply(self, fleet: JunctionFleet, req: np.ndarray, holders: Sequence[dict],
-              wide_paths: Callable, on_route: Callable,
+              wide_paths: Callable, on_routes: Callable,
               after: Mapping[str, set] | None = None) -> tuple[np.ndarray, int]:
         """Withhold the requests whose requested stop point's standing box
         (:meth:`AuthorityReach.hold_box`, padded) meets a zone ``z`` holder's wide path (``wide_paths``)
@@ -73,9 +73,10 @@ class KeepOut:
         wide_paths : callable
             ``(fleet, [(row, zone, first), ...]) -> [(lo, hi) or None, ...]``: holders' paths from
             waypoint ``first`` on (:meth:`tm.authority_gate.AuthorityGate._wide_paths`).
-        on_route : callable
-            ``(fleet, row, rows, ahead) -> bool array``: which ``rows`` have their stop point ``+ ahead``
-            on ``row``'s route (:meth:`tm.authority_gate.AuthorityGate._on_route`).
+        on_routes : callable
+            ``(fleet, rows, js, ahead) -> bool array``: whether row ``js[i]`` has its stop point
+            ``+ ahead`` on row ``rows[i]``'s route, each pair ``i``
+            (:meth:`tm.gate_paths.GatePaths.on_routes`).
         after : mapping of str to set of str, optional
             Holder id -> the holders whose paths it keeps out of although it holds their zone's token
             too: it took the token after them (:meth:`tm.authority_gate.AuthorityGate._after`).
@@ -104,56 +105,71 @@ class KeepOut:
         paths = [(hs, row, *path) for (hs, row), path in zip(owner, wide_paths(fleet, asks)) if path is not None]
         if not paths:
             return out, 0
-        p_lo = np.array([p[2].min(axis=0) for p in paths]) - self.margin   # (P, 2)
-        p_hi = np.array([p[3].max(axis=0) for p in paths]) + self.margin
+        m_box = np.array([len(p[2]) for p in paths], dtype=np.intp)  # each path's boxes, one run each in L_lo
+        s_box = np.cumsum(m_box) - m_box
+        L_lo = np.concatenate([p[2] for p in paths])
+        L_hi = np.concatenate([p[3] for p in paths])
+        p_lo = np.minimum.reduceat(L_lo, s_box, axis=0) - self.margin   # (P, 2)
+        p_hi = np.maximum.reduceat(L_hi, s_box, axis=0) + self.margin
         c_lo, c_hi = fleet.claim_lo[r], fleet.claim_hi[r]
         close = ((c_lo[None, :, 0] <= p_hi[:, None, 0]) & (c_lo[None, :, 1] <= p_hi[:, None, 1]) &
                  (c_hi[None, :, 0] >= p_lo[:, None, 0]) & (c_hi[None, :, 1] >= p_lo[:, None, 1]))  # (P, R)
-        todo = []
-        for (hs, row, lo, hi), m in zip(paths, close):
-            near = r[m]
-            near = near[near != row]
-            if len(near):
-                todo.append((hs, row, lo, hi, near))
-        if not todo:
+        h_row = np.array([p[1] for p in paths], dtype=np.intp)
+        # (path, requester) pairs, path by path, requesters ascending (not the holder itself)
+        pt, pr = np.nonzero(close)
+        pj = r[pr]
+        keep = pj != h_row[pt]
+        pt, pj = pt[keep], pj[keep]
+        if not len(pt):
             return out, 0
-        # ... their standing boxes asked for, computed once; then holder by holder, which asked-for
-        # boxes meet the path ...
-        every = np.unique(np.concatenate([t[4] for t in todo]))
-        a_lo, a_hi = self._standing_by_row(fleet, every, ahead=1)
-        met = []
-        for hs, row, lo, hi, near in todo:
-            hit1 = box_pairs_meet(a_lo[near], a_hi[near], lo, hi)  # the asked-for box against each box of the path
-            asks = hit1.any(axis=1)  # the asked-for box meets the path somewhere
-            if asks.any():
-                met.append((hs, row, lo, hi, near[asks], hit1[asks]))
-        if not met:
+        # ... their standing boxes asked for, computed once; which of them meet each path's boxes ...
+        a_lo, a_hi = self._standing_by_row(fleet, np.unique(pj), ahead=1)
+        pb, bb = self._pair_boxes(pt, m_box, s_box)
+        hit1 = self._meet(a_lo, a_hi, pj[pb], L_lo[bb], L_hi[bb])  # the asked-for box against each box of the path
+        first = np.cumsum(m_box[pt]) - m_box[pt]
+        asks = np.logical_or.reduceat(hit1, first)  # it meets the path somewhere
+        if not asks.any():
             return out, 0
+        hit1 = hit1[np.repeat(asks, m_box[pt])]
+        pt, pj = pt[asks], pj[asks]
         # ... the current standing boxes of those alone ...
-        askers = np.unique(np.concatenate([t[4] for t in met]))
-        n_lo, n_hi = self._standing_by_row(fleet, askers, ahead=0)
-        n_withheld = 0
-        by: dict[int, set[int]] = {}  # withheld row -> the holders' rows that withheld it
-        # ... then holder by holder (each withheld request's holders noted, :meth:`_mutual`)
-        for hs, row, lo, hi, near, hit1 in met:
-            co = set(pos[v] for v in hs if v in pos and ids[row] not in after.get(v, ()))
-            hit0 = box_pairs_meet(n_lo[near], n_hi[near], lo, hi)
-            queue = on_route(fleet, row, near, ahead=1)
-            withheld = []
-            for j, h0, h1, q in zip(near.tolist(), hit0, hit1, queue.tolist()):
-                if q:
-                    h0, h1 = h0[1:], h1[1:]  # its queue: the path after the holder's stop point
-                elif j in co:
-                    continue
-                if h1.any() and not h0.any():
-                    withheld.append(j)
-            for j in withheld:
-                by.setdefault(j, set()).add(row)
-            if withheld:
-                n_withheld += int(out[withheld].sum())
-                out[withheld] = False
-        n_withheld -= self._mutual(ids, by, out)
+        n_lo, n_hi = self._standing_by_row(fleet, np.unique(pj), ahead=0)
+        pb, bb = self._pair_boxes(pt, m_box, s_box)
+        hit0 = self._meet(n_lo, n_hi, pj[pb], L_lo[bb], L_hi[bb])
+        # ... then pair by pair: on the holder's route (its queue), the path after the holder's stop
+        # point counts (its first box left out); off it, the zone's other holders are exempt unless
+        # they took the token after this one (``after``)
+        queue = on_routes(fleet, h_row[pt], pj, ahead=1)
+        first = np.cumsum(m_box[pt]) - m_box[pt]
+        counts = ~(queue[pb] & (bb == s_box[pt][pb]))
+        h1 = np.logical_or.reduceat(hit1 & counts, first)
+        h0 = np.logical_or.reduceat(hit0 & counts, first)
+        co = {t: {pos[v] for v in paths[t][0] if v in pos and ids[paths[t][1]] not in after.get(v, ())}
+              for t in set(pt.tolist())}
+        exempt = np.array([not q and j in co[t] for t, j, q in zip(pt.tolist(), pj.tolist(), queue.tolist())],
+                          dtype=bool).reshape(-1)
+        hit = h1 & ~h0 & ~exempt
+        by: dict[int, set[int]] = {}  # withheld row -> the holders' rows that withheld it (:meth:`_mutual`)
+        for t, j in zip(pt[hit].tolist(), pj[hit].tolist()):
+            by.setdefault(j, set()).add(paths[t][1])
+        if not by:
+            return out, 0
+        out[list(by)] = False
+        n_withheld = len(by) - self._mutual(ids, by, out)
         return out, n_withheld
+
+    @staticmethod
+    def _pair_boxes(pt: np.ndarray, m_box: np.ndarray, s_box: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Every (pair, box of the pair's path) combination: the pair ``pb`` and the box's index ``bb``
+        into the paths' boxes (path ``t``'s: ``s_box[t] .. s_box[t] + m_box[t] - 1``), pair by pair."""
+        n = m_box[pt]
+        return np.repeat(np.arange(len(pt)), n), ranges(s_box[pt], n)
+
+    @staticmethod
+    def _meet(lo: np.ndarray, hi: np.ndarray, rows: np.ndarray, b_lo: np.ndarray, b_hi: np.ndarray) -> np.ndarray:
+        """Whether box ``(lo[rows[i]], hi[rows[i]])`` meets box ``(b_lo[i], b_hi[i])``, each ``i`` (touching
+        counts; :func:`tm.boxes.box_pairs_meet` of one pair)."""
+        return np.all((lo[rows] <= b_hi) & (hi[rows] >= b_lo), axis=1)
 
     def _mutual(self, ids: list, by: dict[int, set[int]], out: np.ndarray) -> int:
         """Let one of each pair of holders kept out of each other's wide path go: each holds a token

@@ -36,7 +36,7 @@ def _apply(fleet, on_route=False):
     return KeepOut({"car": CAR}).apply(
         fleet, req, [{"H": None}],
         lambda f, asks: [PATH if f.ids[row] == "H" else None for row, _, _ in asks],
-        lambda f, row, rows, ahead=0: np.full(len(rows), on_route))
+        lambda f, rows, js, ahead=0: np.full(len(js), on_route))
 
 
 def test_a_request_into_a_holders_path_is_withheld_one_already_in_it_is_not():
@@ -67,7 +67,7 @@ def test_requesters_beyond_the_margin_are_not_looked_at(margin_cut):
         ko.margin = 0.0
     out, n = ko.apply(fleet, np.ones(2, dtype=bool), [{"H": None}],
                       lambda f, asks: [PATH if f.ids[row] == "H" else None for row, _, _ in asks],
-                      lambda f, row, rows, ahead=0: np.zeros(len(rows), dtype=bool))
+                      lambda f, rows, js, ahead=0: np.zeros(len(js), dtype=bool))
     assert n == (0 if margin_cut else 1) and out[1] == margin_cut
 
 
@@ -101,6 +101,72 @@ def test_two_holders_kept_out_of_each_others_path_one_goes(third):
     req = np.array([True, True, False])
     ko = KeepOut({"car": CAR})
     out, n = ko.apply(fleet, req, holders, lambda f, asks: [paths[f.ids[row]] for row, _, _ in asks],
-                      lambda f, row, rows, ahead=0: np.zeros(len(rows), dtype=bool))
+                      lambda f, rows, js, ahead=0: np.zeros(len(js), dtype=bool))
     assert out.tolist() == ([False, False, False] if third else [True, False, False])
     assert n == (2 if third else 1) and ko.mutual_released == (0 if third else 1)
+
+
+def _reference(ko, fleet, req, holders, paths, on_route):
+    """The rule holder by holder, as :meth:`KeepOut.apply` wrote it before its pairs were taken all at
+    once: the same answers expected."""
+    ids = fleet.ids
+    pos = {v: i for i, v in enumerate(ids)}
+    out, by = req.copy(), {}
+    r = np.flatnonzero(req)
+    for hs in holders:
+        for h in hs:
+            row = pos[h]
+            lo, hi = paths[h]
+            p_lo, p_hi = lo.min(axis=0) - ko.margin, hi.max(axis=0) + ko.margin
+            near = r[np.all((fleet.claim_lo[r] <= p_hi) & (fleet.claim_hi[r] >= p_lo), axis=1)]
+            near = near[near != row]
+            if not len(near):
+                continue
+            a_lo, a_hi = ko.standing_boxes(fleet, near, 1)
+            n_lo, n_hi = ko.standing_boxes(fleet, near, 0)
+            co = {pos[v] for v in hs}
+            for i, j in enumerate(near.tolist()):
+                h1 = np.all((a_lo[i] <= hi) & (a_hi[i] >= lo), axis=1)
+                h0 = np.all((n_lo[i] <= hi) & (n_hi[i] >= lo), axis=1)
+                if on_route(row, j):
+                    h1, h0 = h1[1:], h0[1:]
+                elif j in co:
+                    continue
+                if h1.any() and not h0.any():
+                    by.setdefault(j, set()).add(row)
+    out[list(by)] = False
+    return out, len(by) - ko._mutual(ids, by, out)
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_all_pairs_at_once_give_what_the_holders_one_by_one_give(seed):
+    """Random scenes: holders on the north- and east-bound lanes with wide paths of one to four boxes
+    ahead of them, requesters on both lanes, some on a holder's route (its queue): the withheld
+    requests and their count are those of the rule taken holder by holder."""
+    rng = np.random.default_rng(seed)
+    n = 12
+    lanes = [_north, _east]
+    routes = [lanes[i % 2](int(rng.integers(0, 40))) for i in range(n)]
+    ids = [f"v{i}" for i in range(n)]
+    half = [CAR.hold_half(np.array([H[k]]))[0] for _, H, k in routes]
+    lo = np.array([W[k] - h for (W, _, k), h in zip(routes, half)])
+    hi = np.array([W[k] + h for (W, _, k), h in zip(routes, half)])
+    fleet = JunctionFleet(ids, np.array(["car"] * n), lo, hi,
+                          (([W for W, _, _ in routes], [H for _, H, _ in routes], np.array([k for *_, k in routes])),))
+    held = rng.choice(n, size=4, replace=False).tolist()
+    holders = [{ids[held[0]]: None, ids[held[1]]: None}, {ids[held[2]]: None}, {ids[held[3]]: None}]
+    paths = {}
+    for i in held:
+        W, H, k = routes[i]
+        m = int(rng.integers(1, 5))
+        idx = np.minimum(np.arange(k, k + m) + int(rng.integers(0, 3)), len(W) - 1)
+        e = CAR.hold_half(H[idx]) + rng.uniform(0.0, 2.0, (m, 2))
+        paths[ids[i]] = (W[idx] - e, W[idx] + e)
+    queue = {(i, j): bool(rng.random() < 0.3) for i in range(n) for j in range(n)}
+    req = rng.random(n) < 0.8
+    ko = KeepOut({"car": CAR})
+    out, count = ko.apply(fleet, req, holders, lambda f, asks: [paths[f.ids[row]] for row, _, _ in asks],
+                          lambda f, rows, js, ahead=0: np.array([queue[a, b] for a, b in zip(rows.tolist(), js.tolist())],
+                                                                 dtype=bool))
+    want, want_count = _reference(KeepOut({"car": CAR}), fleet, req, holders, paths, lambda a, b: queue[a, b])
+    assert out.tolist() == want.tolist() and count == want_count

@@ -1,0 +1,59 @@
+"""tm/gate_paths.py on its own: which requested stop points lie on another vehicle's route
+(:meth:`GatePaths.on_route`, :meth:`GatePaths.on_routes`).  The gate's scenes that use the paths:
+tests/tm/test_authority_gate.py, tests/tm/test_ordered_entry.py."""
+
+import numpy as np
+import pytest
+
+from tm.authority_reach import AuthorityReach
+from tm.gate_paths import GatePaths
+from tm.junctions import JunctionFleet
+
+CAR = AuthorityReach(hold=0.25, hold_y=0.2, across=1.0, length=4.0, width=1.8, delta=1.0)
+BIKE = AuthorityReach(hold=0.25, hold_y=0.2, across=0.4, length=1.8, width=0.6, delta=0.5)
+
+
+def _fleet(rng, n):
+    """``n`` random routes (10 to 60 waypoints, steps of about 1 m) in a 40 m square, cars and bicycles
+    in two parts, at random stop points."""
+    routes = []
+    for _ in range(n):
+        m = int(rng.integers(10, 60))
+        W = rng.uniform(-20, 20, 2) + np.cumsum(rng.normal(0.0, 0.7, (m, 2)), axis=0)
+        routes.append((W, np.zeros(m), int(rng.integers(0, m))))
+    family = np.array(["car" if i % 3 else "bike" for i in range(n)])
+    half = n // 2
+    parts = tuple(([W for W, _, _ in p], [H for _, H, _ in p], np.array([k for *_, k in p]))
+                  for p in (routes[:half], routes[half:]))
+    return JunctionFleet([f"v{i}" for i in range(n)], family, np.zeros((n, 2)), np.zeros((n, 2)), parts), routes
+
+
+@pytest.mark.parametrize("ahead", [0, 1, 5])
+def test_on_routes_is_each_pair_within_0_6_delta_of_a_waypoint(ahead):
+    """Every pair (row, j): j's stop point ``k + ahead`` (the route's last waypoint at most) within
+    ``0.6 δ`` (its class's) of some waypoint of row's route, as a direct loop finds it; and
+    :meth:`on_route` of one row gives the same as its pairs."""
+    rng = np.random.default_rng(3)
+    fleet, routes = _fleet(rng, 14)
+    paths = GatePaths({"car": CAR, "bike": BIKE}, spans=None)
+    rows = rng.integers(0, 14, 200)
+    js = rng.integers(0, 14, 200)
+    got = paths.on_routes(fleet, rows, js, ahead)
+    want = []
+    for r, j in zip(rows.tolist(), js.tolist()):
+        Wj, _, kj = routes[j]
+        p = Wj[min(kj + ahead, len(Wj) - 1)]
+        tol = 0.6 * (CAR if fleet.family[j] == "car" else BIKE).delta
+        want.append(bool(np.hypot(*(routes[r][0] - p).T).min() <= tol))
+    assert got.tolist() == want
+    assert any(want) and not all(want)
+    for r in range(14):
+        mine = np.flatnonzero(rows == r)
+        assert paths.on_route(fleet, r, js[mine], ahead).tolist() == got[mine].tolist()
+
+
+def test_on_routes_of_no_pairs():
+    fleet, _ = _fleet(np.random.default_rng(0), 4)
+    paths = GatePaths({"car": CAR, "bike": BIKE}, spans=None)
+    assert paths.on_routes(fleet, np.zeros(0, dtype=int), np.zeros(0, dtype=int)).shape == (0,)
+    assert paths.on_route(fleet, 1, np.zeros(0, dtype=int)).shape == (0,)
