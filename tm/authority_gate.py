@@ -329,22 +329,27 @@ class AuthorityGate(JunctionGate):
         stream back for the 12 s it took.  The cut corridor gets its own key (the oriented boxes of
         :meth:`corridors_meet` cut alike)."""
         cur_lo, cur_hi = fleet.claim_lo, fleet.claim_hi
-        for hs in self.holders:
-            for h, (key, lo, hi) in list(hs.items()):
-                j = pos.get(h)
-                if j is None or len(lo) < 2:
-                    continue
-                meets = np.flatnonzero(np.all((lo <= cur_hi[j]) & (hi >= cur_lo[j]), axis=1))
-                if not len(meets) or meets[0] == 0:
-                    continue
-                i0 = int(meets[0])
-                cut = (*key[:3], key[3] + i0 if len(key) > 3 else i0)
-                polys = self._corridor_boxes.get(key)
-                if polys is not None:
-                    n = len(lo)
-                    self._corridor_boxes[cut] = np.concatenate([polys[i0:n], polys[n + i0:]])
-                hs[h] = (cut, lo[i0:], hi[i0:])
-                self.corridors_cut += 1
+        todo = [(hs, h, c, pos[h]) for hs in self.holders for h, c in hs.items() if h in pos and len(c[1]) >= 2]
+        if not todo:
+            return
+        # every holder's first corridor box that its current claim box meets, all at once
+        n = np.array([len(c[1]) for _, _, c, _ in todo], dtype=np.intp)
+        start = np.cumsum(n) - n
+        j = np.repeat(np.array([t[3] for t in todo], dtype=np.intp), n)
+        lo = np.concatenate([c[1] for _, _, c, _ in todo])
+        hi = np.concatenate([c[2] for _, _, c, _ in todo])
+        meets = np.all((lo <= cur_hi[j]) & (hi >= cur_lo[j]), axis=1)
+        first = np.minimum.reduceat(np.where(meets, np.arange(len(j)) - np.repeat(start, n), n.max()), start)
+        for t in np.flatnonzero((first > 0) & (first < n)).tolist():
+            hs, h, (key, lo, hi), _ = todo[t]
+            i0 = int(first[t])
+            cut = (*key[:3], key[3] + i0 if len(key) > 3 else i0)
+            polys = self._corridor_boxes.get(key)
+            if polys is not None:
+                m = len(lo)
+                self._corridor_boxes[cut] = np.concatenate([polys[i0:m], polys[m + i0:]])
+            hs[h] = (cut, lo[i0:], hi[i0:])
+            self.corridors_cut += 1
 
     def _release(self, fleet: JunctionFleet, pos: dict) -> None:
         """:meth:`JunctionGate._release`, except the tokens :attr:`pending`: kept until the holder's

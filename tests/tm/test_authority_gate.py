@@ -462,6 +462,43 @@ def test_a_holders_corridor_is_cut_behind_it(trim):
     assert (gate.corridors_cut > 0) == trim
 
 
+@pytest.mark.parametrize("seed", range(10))
+def test_trim_cuts_each_holder_at_its_first_box_its_claim_meets(seed):
+    """:meth:`AuthorityGate._trim` on many holders at once (random corridors of one to eight boxes and
+    claim boxes, two zones): each holder's corridor is cut to its boxes from the first one its claim
+    box meets, with a key counting on from the cut and its oriented boxes cut alike; a holder whose
+    claim meets its first box, or none, a one-box corridor and a holder gone from the fleet keep theirs."""
+    rng = np.random.default_rng(seed)
+    gate = _gate()
+    n = 9
+    ids = [f"v{i}" for i in range(n)]
+    c_lo = rng.uniform(0.0, 10.0, (n, 2))
+    c_hi = c_lo + rng.uniform(1.0, 5.0, (n, 2))
+    fleet = JunctionFleet(ids, np.array(["car"] * n), c_lo, c_hi, (([], [], np.zeros(0, dtype=np.intp)),))
+    pos = {v: i for i, v in enumerate(ids[:-1])}  # the last one is gone
+    gate.holders = [{}, {}]
+    want, n_cut = {}, 0
+    for i, v in enumerate(ids):
+        m = int(rng.integers(1, 9))
+        lo = rng.uniform(0.0, 10.0, (m, 2))
+        hi = lo + rng.uniform(0.5, 3.0, (m, 2))
+        key = (v, i % 2, 3) if i % 3 else (v, i % 2, 3, 2)
+        gate._corridor_boxes[key] = polys = rng.normal(size=(2 * m, 4, 2))
+        gate.holders[i % 2][v] = (key, lo, hi)
+        meets = np.flatnonzero(np.all((lo <= c_hi[i]) & (hi >= c_lo[i]), axis=1))
+        i0 = int(meets[0]) if len(meets) and v in pos and m > 1 else 0
+        cut = (*key[:3], key[3] + i0 if len(key) > 3 else i0) if i0 else key
+        n_cut += i0 > 0
+        want[v] = (cut, lo[i0:], hi[i0:], np.concatenate([polys[i0:m], polys[m + i0:]]))
+    gate._trim(fleet, pos)
+    for z, hs in enumerate(gate.holders):
+        for v, (key, lo, hi) in hs.items():
+            w = want[v]
+            assert key == w[0] and np.array_equal(lo, w[1]) and np.array_equal(hi, w[2])
+            assert np.array_equal(gate._corridor_boxes[key], w[3])
+    assert gate.corridors_cut == n_cut
+
+
 def test_corridor_runs_from_the_stop_point_to_the_exit_slot_and_is_cached():
     """Corridor boxes at every waypoint from the stop point to the exit slot (±2.75 along, ±1.1
     across); the slot box is the hold box there; a route ending inside the guard has no slot."""
