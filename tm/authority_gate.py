@@ -114,7 +114,7 @@ from __future__ import annotations
 import numpy as np
 
 from tm.authority_reach import AuthorityReach
-from tm.boxes import boxes_meet, corridor_hits, polygon_sets_meet, polygons_meet
+from tm.boxes import boxes_meet, corridor_hits, polygon_sets_meet, polygons_meet, ranges
 from tm.gate_paths import GatePaths
 from tm.guard_spans import GuardSpans
 from tm.junctions import JunctionFleet, JunctionGate
@@ -491,16 +491,34 @@ class AuthorityGate(JunctionGate):
         hits = corridor_hits(zq, rq, first2, lo2, hi2, zs, rs, fleet.claim_lo, fleet.claim_hi)
         if fleet.claim_polygons is None or not hits.any():
             return hits
-        cur_lo, cur_hi = fleet.claim_lo, fleet.claim_hi
-        for q in np.flatnonzero(hits).tolist():
-            a, b = int(first2[q]), int(first2[q + 1])
-            js = rs[np.searchsorted(zs, zq[q], "left"):np.searchsorted(zs, zq[q], "right")]
-            js = js[js != rq[q]]
-            near = np.all((lo2[a:b, None] <= cur_hi[js]) & (hi2[a:b, None] >= cur_lo[js]), axis=2).any(axis=0)
-            js = js[near]
-            # some oriented box of the corridor ahead meets some of theirs (all of them at once)
-            hits[q] = len(js) > 0 and polygons_meet(self._ahead_polygons(fleet, int(rq[q]), keys[q]),
-                                                    fleet.claim_polygons(js)[0])
+        # the (candidate, claim of its zone) pairs whose world boxes meet, all at once ...
+        qs = np.flatnonzero(hits)
+        s = np.searchsorted(zs, zq[qs], "left")
+        cnt = np.searchsorted(zs, zq[qs], "right") - s
+        pq, pj = np.repeat(np.arange(len(qs)), cnt), rs[ranges(s, cnt)]
+        keep = pj != rq[qs][pq]
+        pq, pj = pq[keep], pj[keep]
+        a, nb = first2[qs][pq], (first2[qs + 1] - first2[qs])[pq]
+        bb = ranges(a, nb)
+        jj = np.repeat(pj, nb)
+        near = np.all((lo2[bb] <= fleet.claim_hi[jj]) & (hi2[bb] >= fleet.claim_lo[jj]), axis=1)
+        if len(pq):
+            near = np.logical_or.reduceat(near, np.cumsum(nb) - nb)
+        pq, pj = pq[near], pj[near]
+        hits[qs] = False
+        if not len(pq):
+            return hits
+        # ... then whether some oriented box of a candidate's corridor ahead meets some of each such
+        # claim's, every pair in one compiled pass (each claim's boxes computed once)
+        uq, q_of = np.unique(pq, return_inverse=True)
+        mine = [self._ahead_polygons(fleet, int(rq[qs[q]]), keys[qs[q]]) for q in uq.tolist()]
+        p_cnt = np.array([len(m) for m in mine], dtype=np.intp)
+        uj, j_of = np.unique(pj, return_inverse=True)
+        Q, q_owner = fleet.claim_polygons(uj)
+        q_cnt = np.bincount(q_owner, minlength=len(uj))
+        meet = polygon_sets_meet(np.concatenate(mine), (np.cumsum(p_cnt) - p_cnt)[q_of], p_cnt[q_of],
+                                 Q, (np.cumsum(q_cnt) - q_cnt)[j_of], q_cnt[j_of])
+        hits[qs[pq[meet]]] = True
         return hits
 
     def _ahead_polygons(self, fleet: JunctionFleet, row: int, key) -> np.ndarray:

@@ -28,7 +28,7 @@ from hypothesis import given, settings, strategies as st
 from tm.authority_gate import AuthorityGate
 from tm.authority_reach import AuthorityReach
 from tm.gate_paths import GatePaths
-from tm.boxes import boxes_meet
+from tm.boxes import boxes_meet, corridor_hits, polygons_meet
 from tm.junctions import JunctionFleet, JunctionGate, Zone
 
 CAR = AuthorityReach(hold=0.25, hold_y=0.2, across=1.0, length=4.0, width=1.8, delta=1.0)
@@ -66,6 +66,7 @@ class Scene:
         self.claims = dict(claims or {})
         self.family = [(family or {}).get(v, "car") for v in self.ids]
         self.reach = {"car": CAR, **(reach or {})}
+        self.polygons = False  # whether the fleet knows the claims' oriented boxes (:meth:`claim_polygons`)
 
     def hold_box(self, i: int):
         W, H = self.routes[i]
@@ -91,7 +92,8 @@ class Scene:
         lo = np.array([b[0] for b in boxes], dtype=float).reshape(-1, 2)
         hi = np.array([b[1] for b in boxes], dtype=float).reshape(-1, 2)
         return JunctionFleet(self.ids, np.array(self.family), lo, hi,
-                             (([W for W, _ in self.routes], [H for _, H in self.routes], self.k),))
+                             (([W for W, _ in self.routes], [H for _, H in self.routes], self.k),),
+                             claim_polygons=self.claim_polygons if self.polygons else None)
 
     def withhold(self, gate, t=0):
         n = int(self.requesting.sum())
@@ -222,14 +224,15 @@ def test_a_smaller_waiter_stops_before_a_bigger_holders_claims():
 NARROW = AuthorityReach(hold=0.25, hold_y=0.2, across=0.6, length=4.0, width=1.8, delta=1.0)
 
 
-def _toy_traffic(gate, routes, family, reach, k, steps):
+def _toy_traffic(gate, routes, family, reach, k, steps, polygons=False):
     """A toy traffic manager around ``gate`` (the ``new-fixed`` rule of the real one): every vehicle
     asks for ``k + 1`` each step until its route's end; a request the gate lets through is granted
     when its new claim, the hull of :meth:`AuthorityReach.claim_box` over waypoints ``k - 2 ..
     k + 1`` (the body trails its stop point by up to 3 m), misses the claim of every vehicle that
     stands (was not granted the last step), whose claim is its hold box at its stop point.
     Moving claims pass each other (they are time-indexed in the real one).  Returns the stop
-    points after ``steps`` steps and the step each vehicle last moved."""
+    points after ``steps`` steps and the step each vehicle last moved.  ``polygons``: the fleet knows
+    the claims' oriented boxes (:meth:`Scene.claim_polygons`)."""
     ids = list(routes)
     k = {v: k.get(v, 0) for v in ids}
     moving = dict.fromkeys(ids, False)
@@ -248,6 +251,7 @@ def _toy_traffic(gate, routes, family, reach, k, steps):
         asking = {v for v in ids if k[v] + 1 < len(routes[v][0])}
         scene = Scene({}, k=k, idle=[v for v in ids if v not in asking], claims=claims, routes=routes,
                       family=family, reach=reach)
+        scene.polygons = polygons
         asked = scene.withhold(gate, t=t)
         granted = set()
         for v in asked:
@@ -1192,3 +1196,53 @@ def test_intruders_are_judged_on_the_corridor_ahead_as_oriented_boxes(case, orie
     gate.given_back["A"] = {0}
     asked = gate.withhold(0, fleet, scene.requesting, np.zeros((1, 2)), np.zeros((1, 2)))
     assert bool(asked[0]) == oriented and ("A" in _holders(gate)) == oriented
+
+
+class _OneByOneIntruders(AuthorityGate):
+    """:meth:`AuthorityGate._intruder_hits` as it was written before its pairs were taken all at once:
+    candidate by candidate, the claims of its zone near its corridor ahead, then the oriented boxes."""
+
+    def _intruder_hits(self, fleet, keys, zq, rq, first, c_lo, c_hi, zs, rs):
+        n = np.diff(first)
+        keep = np.ones(len(c_lo), dtype=bool)
+        keep[first[:-1][n > 1]] = False
+        first2 = np.r_[0, np.cumsum(n - (n > 1))]
+        lo2, hi2 = c_lo[keep], c_hi[keep]
+        hits = corridor_hits(zq, rq, first2, lo2, hi2, zs, rs, fleet.claim_lo, fleet.claim_hi)
+        if fleet.claim_polygons is None or not hits.any():
+            return hits
+        self.oriented_asked = getattr(self, "oriented_asked", 0) + int(hits.sum())
+        for q in np.flatnonzero(hits).tolist():
+            a, b = int(first2[q]), int(first2[q + 1])
+            js = rs[np.searchsorted(zs, zq[q], "left"):np.searchsorted(zs, zq[q], "right")]
+            js = js[js != rq[q]]
+            near = np.all((lo2[a:b, None] <= fleet.claim_hi[js]) & (hi2[a:b, None] >= fleet.claim_lo[js]),
+                          axis=2).any(axis=0)
+            js = js[near]
+            hits[q] = len(js) > 0 and polygons_meet(self._ahead_polygons(fleet, int(rq[q]), keys[q]),
+                                                    fleet.claim_polygons(js)[0])
+        return hits
+
+
+def test_intruders_judged_all_at_once_as_candidate_by_candidate():
+    """Queues on all four arms of ``J`` (three cars each, 6 m apart) and a car ``X`` on the west arm's
+    lane whose route ends 4 m past the centre, inside the guard, without a token (an intruder in the
+    north- and south-bound corridors once it stands there) under the toy traffic manager: the gate with
+    :meth:`AuthorityGate._intruder_hits` taking every (candidate, claim) pair at once moves every
+    vehicle as the candidate-by-candidate one does, step by step."""
+    routes = {}
+    for name, ((x0, y0), (x1, y1)) in {"E": EAST, "W": WEST, "N": NORTH, "S": SOUTH}.items():
+        d = np.array([x1 - x0, y1 - y0]) / np.hypot(x1 - x0, y1 - y0)
+        for i in range(3):
+            a = np.array([x0, y0]) - 6.0 * i * d
+            routes[f"{name}{i}"] = _route(a, (x1, y1))
+    routes["X"] = _route((-30.0, 1.6), (4.0, 1.6))
+    family = dict.fromkeys(routes, "car")
+    runs = []
+    for cls in (AuthorityGate, _OneByOneIntruders):
+        gate = cls([J], {"car": CAR})
+        runs.append((_toy_traffic(gate, routes, family, {"car": CAR}, {"X": 30}, steps=120, polygons=True),
+                     gate))
+    (got, mine), (want, ref) = runs
+    assert got == want and mine.tokens_granted == ref.tokens_granted
+    assert ref.oriented_asked > 0
