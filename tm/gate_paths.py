@@ -22,6 +22,8 @@ from tm.junctions import JunctionFleet
 __all__ = ["GatePaths"]
 
 _UNSET = object()  # not kept yet (:meth:`GatePaths.wide_paths`; None is a kept answer)
+#: waypoints per run of a route whose bounding box :meth:`GatePaths.on_routes` tests first
+_CHUNK = 16
 
 
 class GatePaths:
@@ -43,6 +45,8 @@ class GatePaths:
         #: (vehicle, zone, waypoint) -> its wide path beyond its stop point as oriented boxes (:meth:`wide_polygons`)
         self._wide_poly: dict = {}
         self._stand_memo: tuple = (None, {})  # (fleet, row -> standing box) (:meth:`standing`)
+        #: vehicle -> (its route, the bounding boxes of the route's runs of waypoints) (:meth:`_chunks`)
+        self._route_chunks: dict = {}
         #: (vehicle, its path's entry and exit slot, leader, the leader's) -> whether they are the same lanes
         #: (:meth:`follows`; the paths are pieces of the routes, which never change)
         self._lanes: dict = {}
@@ -162,12 +166,17 @@ class GatePaths:
 
     def on_routes(self, fleet: JunctionFleet, rows: np.ndarray, j: np.ndarray, ahead: int = 0) -> np.ndarray:
         """:meth:`on_route` of pairs: whether row ``j[i]``'s requested stop point (``k + ahead``) lies
-        on row ``rows[i]``'s route (within ``0.6 δ`` of one of its waypoints), all pairs at once
-        (each route's waypoints gathered once)."""
+        on row ``rows[i]``'s route (within ``0.6 δ`` of one of its waypoints), all pairs at once.
+
+        Only the runs of :data:`_CHUNK` waypoints whose bounding box, widened by the tolerance (and a
+        rounding's slack), holds the point are measured (:meth:`_chunks`): a waypoint within ``0.6 δ``
+        lies within it on either axis.  A route with a NaN waypoint is measured whole (its minimum
+        distance NaN, as a direct minimum makes it)."""
         rows = np.asarray(rows, dtype=np.intp).reshape(-1)
         j = np.asarray(j, dtype=np.intp).reshape(-1)
+        out = np.zeros(len(j), dtype=bool)
         if not len(j):
-            return np.zeros(0, dtype=bool)
+            return out
         pts, tol = np.empty((len(j), 2)), np.empty(len(j))
         for n, jj in enumerate(j.tolist()):
             Wj, _, kj = fleet.route(jj)
@@ -175,13 +184,50 @@ class GatePaths:
             tol[n] = 0.6 * self.classes[fleet.family[jj]].delta
         u, inv = np.unique(rows, return_inverse=True)
         Ws = [fleet.route(r)[0] for r in u.tolist()]
-        cnt = np.array([len(W) for W in Ws], dtype=np.intp)
-        W = np.concatenate(Ws)
-        n_w = cnt[inv]  # each pair's route length, and its waypoints in W
-        p = np.repeat(np.arange(len(j)), n_w)
-        w = ranges((np.cumsum(cnt) - cnt)[inv], n_w)
-        d = np.hypot(W[w, 0] - pts[p, 0], W[w, 1] - pts[p, 1])
-        return np.minimum.reduceat(d, np.cumsum(n_w) - n_w) <= tol
+        ch = [self._chunks(fleet, fleet.ids[r], W) for r, W in zip(u.tolist(), Ws)]
+        whole = np.array([c is None for c in ch], dtype=bool)
+        if whole.any():  # NaN in the route: every waypoint, as a direct minimum takes them
+            for t in np.flatnonzero(whole[inv]).tolist():
+                W = Ws[inv[t]]
+                out[t] = np.hypot(W[:, 0] - pts[t, 0], W[:, 1] - pts[t, 1]).min() <= tol[t]
+        c_lo = np.concatenate([c[0] for c in ch if c is not None] or [np.zeros((0, 2))])
+        c_hi = np.concatenate([c[1] for c in ch if c is not None] or [np.zeros((0, 2))])
+        cnt = np.array([0 if c is None else len(c[0]) for c in ch], dtype=np.intp)
+        n_c = cnt[inv]  # each pair's route's chunks, and their places in c_lo
+        pc = np.repeat(np.arange(len(j)), n_c)
+        cc = ranges((np.cumsum(cnt) - cnt)[inv], n_c)
+        slack = tol * (1.0 + 1e-9) + 1e-9
+        near = np.all((c_lo[cc] - slack[pc, None] <= pts[pc]) & (pts[pc] <= c_hi[cc] + slack[pc, None]), axis=1)
+        pc, cc = pc[near], cc[near]
+        if not len(pc):
+            return out
+        first = (cc - (np.cumsum(cnt) - cnt)[inv][pc]) * _CHUNK  # each chunk's first waypoint in its route
+        seg = [Ws[inv[p]][f:f + _CHUNK] for p, f in zip(pc.tolist(), first.tolist())]
+        m = np.array([len(s) for s in seg], dtype=np.intp)
+        W = np.concatenate(seg)
+        p = np.repeat(pc, m)
+        d = np.hypot(W[:, 0] - pts[p, 0], W[:, 1] - pts[p, 1])
+        out[p[d <= tol[p]]] = True
+        return out
+
+    def _chunks(self, fleet: JunctionFleet, vid: str, W: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+        """Bounding boxes ``(lo, hi)`` (C, 2) of vehicle ``vid``'s route ``W``'s runs of :data:`_CHUNK`
+        waypoints (:meth:`on_routes`), kept per vehicle while its route is the same array (the entry
+        holds it); None when a waypoint is NaN.  The vehicles no longer in ``fleet`` are dropped once
+        the kept ones are many more than it."""
+        got = self._route_chunks.get(vid)
+        if got is None or got[0] is not W:
+            if len(self._route_chunks) > 2 * len(fleet.ids) + 1000:  # vehicles gone
+                live = set(fleet.ids)
+                self._route_chunks = {v: c for v, c in self._route_chunks.items() if v in live}
+            C = -(-len(W) // _CHUNK)
+            if np.isnan(W).any():
+                box = None
+            else:
+                pad = np.concatenate([W, np.repeat(W[-1:], C * _CHUNK - len(W), axis=0)]).reshape(C, _CHUNK, 2)
+                box = (pad.min(axis=1), pad.max(axis=1))
+            got = self._route_chunks[vid] = (W, box)
+        return got[1]
 
     def follows(self, fleet: JunctionFleet, pos: dict, row: int, z: int, leaders: list) -> bool:
         """A queue through the junction: row ``row`` may take zone ``z``'s token although its

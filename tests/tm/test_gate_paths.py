@@ -57,3 +57,34 @@ def test_on_routes_of_no_pairs():
     paths = GatePaths({"car": CAR, "bike": BIKE}, spans=None)
     assert paths.on_routes(fleet, np.zeros(0, dtype=int), np.zeros(0, dtype=int)).shape == (0,)
     assert paths.on_route(fleet, 1, np.zeros(0, dtype=int)).shape == (0,)
+
+
+def test_on_routes_of_a_route_with_a_nan_waypoint_is_false_as_a_direct_minimum_makes_it():
+    """A NaN waypoint makes a direct minimum distance NaN: no pair on that route counts, even one
+    standing on another of its waypoints."""
+    fleet, routes = _fleet(np.random.default_rng(1), 4)
+    paths = GatePaths({"car": CAR, "bike": BIKE}, spans=None)
+    j = np.array([0, 1, 2, 3])
+    assert paths.on_routes(fleet, np.zeros(4, dtype=int), j)[0]  # its own stop point
+    routes[0][0][3] = np.nan  # the same array, changed in place: measured whole from now on
+    paths = GatePaths({"car": CAR, "bike": BIKE}, spans=None)
+    assert not paths.on_routes(fleet, np.zeros(4, dtype=int), j).any()
+
+
+def test_the_route_chunks_are_kept_per_vehicle_while_its_route_is_the_same_array():
+    """:meth:`GatePaths._chunks` are kept per vehicle and made anew for a new route array (a vehicle
+    whose route changed, or an id used again): a point on the new route counts, one on the old does not."""
+    rng = np.random.default_rng(2)
+    fleet, routes = _fleet(rng, 4)
+    paths = GatePaths({"car": CAR, "bike": BIKE}, spans=None)
+    W0 = routes[0][0]
+    assert paths.on_routes(fleet, np.array([0]), np.array([0])).tolist() == [True]
+    new = W0 + 100.0
+    parts = (([new] + [W for W, _, _ in routes[1:2]], [routes[0][1], routes[1][1]], np.array([routes[0][2], routes[1][2]])),
+             ([W for W, _, _ in routes[2:]], [H for _, H, _ in routes[2:]], np.array([k for *_, k in routes[2:]])))
+    moved = JunctionFleet(fleet.ids, fleet.family, fleet.claim_lo, fleet.claim_hi, parts)
+    assert paths.on_routes(moved, np.array([0]), np.array([0])).tolist() == [True]   # its own new stop point
+    assert paths.on_routes(moved, np.array([0]), np.array([1])).tolist() == \
+        [bool(np.hypot(*(new - routes[1][0][min(routes[1][2], len(routes[1][0]) - 1)]).T).min() <= 0.6)]
+    lo, _ = paths._chunks(fleet, "v0", new)
+    assert np.array_equal(lo[0], new[:16].min(axis=0))
