@@ -293,6 +293,8 @@ class AuthorityGate(JunctionGate):
         rows, n_wants = np.unique(wrow, return_counts=True)
         self._chained = set(rows[n_wants > 1].tolist())  # they want several zones this round (:meth:`_after`)
         self._offered = set()
+        if self.ordered_entry:  # the waiters' standing boxes, asked for by :meth:`_after`, all at once
+            self.paths.standing_many(fleet, wrow)
         allowed = super()._hand_out(t, fleet, pos, wz, wrow)
         if not len(wrow):
             return allowed

@@ -113,6 +113,32 @@ class GatePaths:
             got = memo[1][row] = self.standing_box(fleet, row)
         return got
 
+    def standing_many(self, fleet: JunctionFleet, rows: np.ndarray) -> None:
+        """Keep :meth:`standing` of every row of ``rows`` not kept yet for ``fleet``, computed together
+        (one padding lookup, the boxes one class at a time; each the floats :meth:`standing_box` gives)."""
+        memo = self._stand_memo
+        if memo[0] is not fleet:
+            memo = self._stand_memo = (fleet, {})
+        todo = [r for r in dict.fromkeys(np.asarray(rows, dtype=np.intp).reshape(-1).tolist()) if r not in memo[1]]
+        if not todo:
+            return
+        w, h_in, h_out, at = [], [], [], []
+        for r in todo:
+            W, H, k = fleet.route(r)
+            w.append(W[k])
+            h_in.append(H[k])
+            h_out.append(H[min(k + 1, len(H) - 1)])
+            at.append(k)
+        w, h_in, h_out = np.array(w, dtype=float).reshape(-1, 2), np.array(h_in, dtype=float), np.array(h_out, dtype=float)
+        pad = fleet.pad_rows(np.array(todo, dtype=np.intp), np.array(at, dtype=np.intp))
+        fam = np.asarray(fleet.family)[todo]
+        lo, hi = np.empty((len(todo), 2)), np.empty((len(todo), 2))
+        for c in np.unique(fam).tolist():
+            m = fam == c
+            lo[m], hi[m] = self.classes[c].hold_box(pad[m], h_in[m], h_out[m])
+        for i, r in enumerate(todo):
+            memo[1][r] = (w[i] + lo[i], w[i] + hi[i])
+
     def at_stop(self, fleet: JunctionFleet, row: int) -> tuple:
         """Row ``row``'s class, stop point ``W[k]`` (1, 2), padding there (1, 4) and the stop point's
         arriving and leaving headings (1,) each: what its hold box at rest is drawn from."""

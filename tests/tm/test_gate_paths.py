@@ -88,3 +88,29 @@ def test_the_route_chunks_are_kept_per_vehicle_while_its_route_is_the_same_array
         [bool(np.hypot(*(new - routes[1][0][min(routes[1][2], len(routes[1][0]) - 1)]).T).min() <= 0.6)]
     lo, _ = paths._chunks(fleet, "v0", new)
     assert np.array_equal(lo[0], new[:16].min(axis=0))
+
+
+def test_standing_many_keeps_the_boxes_standing_box_gives():
+    """:meth:`GatePaths.standing_many` keeps, for the fleet asked, every row's standing box as the
+    floats :meth:`GatePaths.standing_box` gives one row at a time (two classes, padding per row and
+    waypoint); a row kept already is left as it is, and a new fleet starts afresh."""
+    rng = np.random.default_rng(4)
+    fleet, routes = _fleet(rng, 10)
+    for r, (W, H, k) in enumerate(routes):
+        H[:] = rng.uniform(-np.pi, np.pi, len(H))
+    fleet = JunctionFleet(fleet.ids, fleet.family, fleet.claim_lo, fleet.claim_hi, fleet.parts,
+                          pads=lambda rows, idx: np.column_stack([0.1 * rows, 0.01 * idx, 0.2 + 0 * rows, 0.3 * (idx % 3)]))
+    paths = GatePaths({"car": CAR, "bike": BIKE}, spans=None)
+    paths.standing_many(fleet, np.array([3, 1, 3, 7, 0, 9, 2]))
+    memo = paths._stand_memo[1]
+    assert sorted(memo) == [0, 1, 2, 3, 7, 9]
+    for r in memo:
+        want = paths.standing_box(fleet, r)
+        assert np.array_equal(memo[r][0], want[0]) and np.array_equal(memo[r][1], want[1])
+        assert paths.standing(fleet, r) is memo[r]
+    kept = memo[3]
+    paths.standing_many(fleet, np.array([3, 4]))
+    assert paths._stand_memo[1][3] is kept and 4 in paths._stand_memo[1]
+    other = JunctionFleet(fleet.ids, fleet.family, fleet.claim_lo, fleet.claim_hi, fleet.parts)
+    paths.standing_many(other, np.array([5]))
+    assert paths._stand_memo[0] is other and list(paths._stand_memo[1]) == [5]
