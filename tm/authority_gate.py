@@ -123,6 +123,15 @@ from tm.stalls import StallClock
 
 __all__ = ["AuthorityReach", "AuthorityGate"]  # AuthorityReach: re-exported from tm.authority_reach
 
+def corridors_ahead(first: np.ndarray, c_lo: np.ndarray, c_hi: np.ndarray):
+    """The corridors ``c_lo[first[q]:first[q+1]]`` (and ``c_hi``) without the box at each one's
+    current waypoint where more follow (:meth:`AuthorityGate._intruder_hits`): ``(first2, lo2, hi2)``."""
+    n = np.diff(first)
+    keep = np.ones(len(c_lo), dtype=bool)
+    keep[first[:-1][n > 1]] = False
+    return np.r_[0, np.cumsum(n - (n > 1))], c_lo[keep], c_hi[keep]
+
+
 class AuthorityGate(JunctionGate):
     """:class:`tm.junctions.JunctionGate` with the movement-authority rules (module notes).
 
@@ -485,11 +494,7 @@ class AuthorityGate(JunctionGate):
         queued behind it, for good."""
         if not self.oriented_intruders:
             return super()._intruder_hits(fleet, keys, zq, rq, first, c_lo, c_hi, zs, rs)
-        n = np.diff(first)
-        keep = np.ones(len(c_lo), dtype=bool)
-        keep[first[:-1][n > 1]] = False
-        first2 = np.r_[0, np.cumsum(n - (n > 1))]
-        lo2, hi2 = c_lo[keep], c_hi[keep]
+        first2, lo2, hi2 = corridors_ahead(first, c_lo, c_hi)
         hits = corridor_hits(zq, rq, first2, lo2, hi2, zs, rs, fleet.claim_lo, fleet.claim_hi)
         if fleet.claim_polygons is None or not hits.any():
             return hits

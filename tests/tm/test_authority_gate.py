@@ -25,7 +25,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from tm.authority_gate import AuthorityGate
+from tm.authority_gate import AuthorityGate, corridors_ahead
 from tm.authority_reach import AuthorityReach
 from tm.gate_paths import GatePaths
 from tm.boxes import boxes_meet, corridor_hits, polygons_meet
@@ -1203,11 +1203,7 @@ class _OneByOneIntruders(AuthorityGate):
     candidate by candidate, the claims of its zone near its corridor ahead, then the oriented boxes."""
 
     def _intruder_hits(self, fleet, keys, zq, rq, first, c_lo, c_hi, zs, rs):
-        n = np.diff(first)
-        keep = np.ones(len(c_lo), dtype=bool)
-        keep[first[:-1][n > 1]] = False
-        first2 = np.r_[0, np.cumsum(n - (n > 1))]
-        lo2, hi2 = c_lo[keep], c_hi[keep]
+        first2, lo2, hi2 = corridors_ahead(first, c_lo, c_hi)
         hits = corridor_hits(zq, rq, first2, lo2, hi2, zs, rs, fleet.claim_lo, fleet.claim_hi)
         if fleet.claim_polygons is None or not hits.any():
             return hits
