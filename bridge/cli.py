@@ -20,6 +20,8 @@ import sys
 import time
 from pathlib import Path
 
+from bridge.interrupt import InterruptGuard
+
 __all__ = ["main"]
 
 
@@ -128,14 +130,16 @@ def _cmd_run(args) -> int:
                   ".sumocfg)", file=sys.stderr)
             return 2
         try:
-            summary = run_scenario(args.scenario, out, args)
+            with InterruptGuard() as guard:
+                summary = run_scenario(args.scenario, out, args, observers_extra=[guard])
         except ScenarioRunError as exc:
             print(f"muvsim run: {exc}", file=sys.stderr)
             return 2
     else:
         from bridge.sumo_world import run_sumo
 
-        summary = run_sumo(args.scenario, out, args)
+        with InterruptGuard() as guard:
+            summary = run_sumo(args.scenario, out, args, observers_extra=[guard])
     if "error" in summary:
         if getattr(args, "debug", False) and summary.get("traceback"):
             print(summary["traceback"], file=sys.stderr)

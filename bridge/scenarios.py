@@ -43,13 +43,15 @@ def _write_summary(out: Path, summary: dict) -> None:
     write_summary(out, summary)
 
 
-def run_scenario(name: str, out: Path, opts) -> dict:
-    """Run built-in scenario ``name`` with CLI-like options ``opts``; returns the summary."""
+def run_scenario(name: str, out: Path, opts, observers_extra: list | None = None) -> dict:
+    """Run built-in scenario ``name`` with CLI-like options ``opts``; returns the summary.
+    ``observers_extra``: more :class:`~bridge.cosim.Cosim` observers for a multi-vehicle run
+    (:func:`run_multi`)."""
     from controllers.classes import ClassError, get_class
     from controllers.synthesis import SynthesisError
 
     if name in ("paper10", "swap", "crossing") or getattr(opts, "controller", "paper") == "authority":
-        return run_multi(name, Path(out), opts)
+        return run_multi(name, Path(out), opts, observers_extra=observers_extra)
     if name not in SCENARIOS:
         raise ScenarioRunError(f"unknown scenario {name!r}; built-in scenarios: {', '.join(SCENARIOS)}")
     try:
@@ -104,8 +106,9 @@ def run_scenario(name: str, out: Path, opts) -> dict:
     return summary
 
 
-def run_multi(name: str, out: Path, opts, world=None, specs=None) -> dict:
-    """Run a multi-vehicle scenario through :class:`bridge.cosim.Cosim`; write summary and CSVs."""
+def run_multi(name: str, out: Path, opts, world=None, specs=None, observers_extra: list | None = None) -> dict:
+    """Run a multi-vehicle scenario through :class:`bridge.cosim.Cosim`; write summary and CSVs.
+    ``observers_extra``: more observers (``on_step(sim, state, decision, row)``), before the outputs'."""
     from analysis.halts import HaltCounter
     from analysis.mcap_log import observers_for
     from analysis.outputs import StreamingOutputs, close_observers, write_run_tables
@@ -159,6 +162,7 @@ def run_multi(name: str, out: Path, opts, world=None, specs=None) -> dict:
                                  frame=getattr(opts, "frame", None) or "auto")
         observers = [HaltCounter()] + observers_for(out, getattr(opts, "log", None) or "none",
                                                     {"scenario": name, "seed": opts.seed, **options})
+        observers += list(observers_extra or [])
         observers.append(StreamingOutputs(out, dict(summary)))  # last: the row is complete by then
         sim = Cosim(classes, specs, settings, world=world, zones=zones, observers=observers)
         max_steps = int(getattr(opts, "max_steps", 0) or 20000)

@@ -1,0 +1,70 @@
+"""A Ctrl-C is never lost (bridge.interrupt): Python drops a KeyboardInterrupt raised inside a
+finalizer; the guard remembers it and the run ends at the end of that step, outputs kept."""
+
+import json
+import os
+import signal
+from types import SimpleNamespace
+
+import pytest
+
+from bridge.interrupt import InterruptGuard
+from bridge.scenarios import run_scenario
+
+# Python reports the dropped exception (pytest as a warning): that drop is what is tested here
+pytestmark = pytest.mark.filterwarnings("ignore::pytest.PytestUnraisableExceptionWarning")
+
+
+class _Dropped:
+    """Sends SIGINT from its finalizer: the handler's KeyboardInterrupt is raised there and dropped."""
+
+    def __del__(self):
+        os.kill(os.getpid(), signal.SIGINT)
+        for _ in range(1000):  # the handler runs between bytecodes, still inside __del__
+            pass
+
+
+def test_a_dropped_ctrl_c_is_remembered_and_raised_at_the_step():
+    with InterruptGuard() as guard:
+        _Dropped()  # its KeyboardInterrupt is dropped: we get past this line
+        assert guard.pending
+        with pytest.raises(KeyboardInterrupt):
+            guard.on_step(None, None, None, None)
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # the handler is put back
+
+
+class _DropAt:
+    """An observer that makes a SIGINT get dropped at step ``t``."""
+
+    def __init__(self, t):
+        self.t = t
+
+    def on_step(self, sim, state, decision, row):
+        if sim.t == self.t:
+            _Dropped()
+
+
+def _opts():
+    return SimpleNamespace(vehicles=4, vclass="car", controller="authority", tm="optimal", check="timed",
+                           switching="early", disturbance="random", solver="exact", seed=0, duration=60.0,
+                           log="none", frame=None, claim_cache=None, max_steps=None)
+
+
+@pytest.mark.parametrize("guarded", [True, False])
+def test_a_run_ends_at_the_step_of_a_dropped_ctrl_c(tmp_path, guarded):
+    """``swap`` with 4 cars; at step 20 a SIGINT is dropped inside a finalizer.  Guarded (as ``muvsim
+    run`` runs), the run ends there, interrupted, its outputs kept; without the guard's observer it
+    runs on to its end: the drop is real."""
+    out = tmp_path / "run"
+    extra = [_DropAt(20)]
+    with InterruptGuard() as guard:
+        if guarded:
+            with pytest.raises(KeyboardInterrupt):
+                run_scenario("swap", out, _opts(), observers_extra=extra + [guard])
+        else:
+            run_scenario("swap", out, _opts(), observers_extra=extra)
+    s = json.loads((out / "summary.json").read_text())
+    if guarded:
+        assert s["interrupted"] is True and s["complete"] is False and s["steps"] <= 21
+    else:
+        assert s["complete"] is True and s["steps"] > 21
