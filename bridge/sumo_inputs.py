@@ -48,6 +48,13 @@ class InputError(ValueError):
     """An input file SUMO's configuration names that cannot be read; names the file."""
 
 
+def _open_xml(p: Path):
+    """``p`` opened for reading in binary, through gzip when its magic bytes say so."""
+    with open(p, "rb") as fh:
+        gz = fh.read(2) == b"\x1f\x8b"
+    return gzip.open(p, "rb") if gz else open(p, "rb")
+
+
 def parse_xml(path: str | os.PathLike) -> ET.ElementTree:
     """Parse an XML file, gzipped (by its magic bytes) or not.
 
@@ -58,9 +65,7 @@ def parse_xml(path: str | os.PathLike) -> ET.ElementTree:
     """
     p = Path(path)
     try:
-        with open(p, "rb") as fh:
-            gz = fh.read(2) == b"\x1f\x8b"
-        with (gzip.open(p, "rb") if gz else open(p, "rb")) as fh:
+        with _open_xml(p) as fh:
             return ET.parse(fh)
     except (OSError, EOFError) as exc:
         raise InputError(f"{p}: cannot be read: {getattr(exc, 'strerror', None) or exc}") from None
@@ -83,9 +88,7 @@ def net_turn_accel(path: str | os.PathLike) -> float | None:
     """
     p = Path(path)
     try:
-        with open(p, "rb") as fh:
-            gz = fh.read(2) == b"\x1f\x8b"
-        with (gzip.open(p, "rb") if gz else open(p, "rb")) as fh:
+        with _open_xml(p) as fh:
             root = next(el for _, el in ET.iterparse(fh, events=("start",)))
     except (OSError, EOFError) as exc:
         raise InputError(f"{p}: cannot be read: {getattr(exc, 'strerror', None) or exc}") from None

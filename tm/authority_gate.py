@@ -123,6 +123,7 @@ from tm.stalls import StallClock
 
 __all__ = ["AuthorityReach", "AuthorityGate"]  # AuthorityReach: re-exported from tm.authority_reach
 
+
 def corridors_ahead(first: np.ndarray, c_lo: np.ndarray, c_hi: np.ndarray):
     """The corridors ``c_lo[first[q]:first[q+1]]`` (and ``c_hi``) without the box at each one's
     current waypoint where more follow (:meth:`AuthorityGate._intruder_hits`): ``(first2, lo2, hi2)``."""

@@ -19,7 +19,7 @@ from tm.boxes import boxes_meet, ranges
 from tm.guard_spans import GuardSpans
 from tm.junctions import JunctionFleet
 
-__all__ = ["GatePaths"]
+__all__ = ["GatePaths", "standing_boxes"]
 
 _UNSET = object()  # not kept yet (:meth:`GatePaths.wide_paths`; None is a kept answer)
 #: waypoints per run of a route whose bounding box :meth:`GatePaths.on_routes` tests first
@@ -122,22 +122,9 @@ class GatePaths:
         todo = [r for r in dict.fromkeys(np.asarray(rows, dtype=np.intp).reshape(-1).tolist()) if r not in memo[1]]
         if not todo:
             return
-        w, h_in, h_out, at = [], [], [], []
-        for r in todo:
-            W, H, k = fleet.route(r)
-            w.append(W[k])
-            h_in.append(H[k])
-            h_out.append(H[min(k + 1, len(H) - 1)])
-            at.append(k)
-        w, h_in, h_out = np.array(w, dtype=float).reshape(-1, 2), np.array(h_in, dtype=float), np.array(h_out, dtype=float)
-        pad = fleet.pad_rows(np.array(todo, dtype=np.intp), np.array(at, dtype=np.intp))
-        fam = np.asarray(fleet.family)[todo]
-        lo, hi = np.empty((len(todo), 2)), np.empty((len(todo), 2))
-        for c in np.unique(fam).tolist():
-            m = fam == c
-            lo[m], hi[m] = self.classes[c].hold_box(pad[m], h_in[m], h_out[m])
+        lo, hi = standing_boxes(self.classes, fleet, np.array(todo, dtype=np.intp), 0)
         for i, r in enumerate(todo):
-            memo[1][r] = (w[i] + lo[i], w[i] + hi[i])
+            memo[1][r] = (lo[i], hi[i])
 
     def at_stop(self, fleet: JunctionFleet, row: int) -> tuple:
         """Row ``row``'s class, stop point ``W[k]`` (1, 2), padding there (1, 4) and the stop point's
@@ -349,3 +336,29 @@ class GatePaths:
         return [int(j) for j, q in zip(others.tolist(), on.tolist())
                 if not q and self.beyond_meets(fleet, row, z, self.standing(fleet, j))
                 and not self.beyond_meets(fleet, j, z, mine)]
+
+
+def standing_boxes(classes: Mapping[str, AuthorityReach], fleet: JunctionFleet, rows: np.ndarray,
+                   ahead: int) -> tuple[np.ndarray, np.ndarray]:
+    """World boxes ``(lo, hi)`` (n, 2) of ``rows`` standing (padded :meth:`AuthorityReach.hold_box`)
+    at their waypoints ``k + ahead`` (the route's last at most): ``0`` at their stop points, ``1``
+    at the ones they ask for; ``classes``: the vehicle classes' extents (:class:`GatePaths`,
+    :class:`tm.keep_out.KeepOut`)."""
+    n = len(rows)
+    if not n:
+        return np.zeros((0, 2)), np.zeros((0, 2))
+    routes = [fleet.route(j) for j in rows.tolist()]
+    k = np.array([r[2] for r in routes], dtype=np.intp)
+    last = np.array([len(r[0]) - 1 for r in routes], dtype=np.intp)
+    idx = np.minimum(k + ahead, last)
+    nxt = np.minimum(idx + 1, last)
+    Wp = np.array([r[0][i] for r, i in zip(routes, idx.tolist())], dtype=float).reshape(n, 2)
+    Ha = np.array([r[1][i] for r, i in zip(routes, idx.tolist())], dtype=float)
+    Hb = np.array([r[1][i] for r, i in zip(routes, nxt.tolist())], dtype=float)
+    pad = fleet.pad_rows(rows, idx)
+    b_lo, b_hi = np.empty((n, 2)), np.empty((n, 2))
+    fam = np.asarray(fleet.family)[rows]
+    for c in np.unique(fam).tolist():
+        m = fam == c
+        b_lo[m], b_hi[m] = classes[c].hold_box(pad[m], Ha[m], Hb[m])
+    return Wp + b_lo, Wp + b_hi

@@ -18,10 +18,10 @@ import numpy as np
 
 from tm.authority_reach import AuthorityReach
 from tm.boxes import ranges
+from tm.gate_paths import standing_boxes
 from tm.junctions import JunctionFleet
 
 __all__ = ["KeepOut"]
-
 
 
 class KeepOut:
@@ -198,24 +198,5 @@ class KeepOut:
         return lo, hi
 
     def standing_boxes(self, fleet: JunctionFleet, rows: np.ndarray, ahead: int) -> tuple[np.ndarray, np.ndarray]:
-        """World boxes ``(lo, hi)`` (n, 2) of ``rows`` standing (padded :meth:`AuthorityReach.hold_box`)
-        at their waypoints ``k + ahead`` (the route's last at most): ``0`` at their stop points, ``1``
-        at the ones they ask for."""
-        n = len(rows)
-        if not n:
-            return np.zeros((0, 2)), np.zeros((0, 2))
-        routes = [fleet.route(j) for j in rows.tolist()]
-        k = np.array([r[2] for r in routes], dtype=np.intp)
-        last = np.array([len(r[0]) - 1 for r in routes], dtype=np.intp)
-        idx = np.minimum(k + ahead, last)
-        nxt = np.minimum(idx + 1, last)
-        Wp = np.array([r[0][i] for r, i in zip(routes, idx.tolist())], dtype=float).reshape(n, 2)
-        Ha = np.array([r[1][i] for r, i in zip(routes, idx.tolist())], dtype=float)
-        Hb = np.array([r[1][i] for r, i in zip(routes, nxt.tolist())], dtype=float)
-        pad = fleet.pad_rows(rows, idx)
-        b_lo, b_hi = np.empty((n, 2)), np.empty((n, 2))
-        fam = np.asarray(fleet.family)[rows]
-        for c in np.unique(fam).tolist():
-            m = fam == c
-            b_lo[m], b_hi[m] = self.classes[c].hold_box(pad[m], Ha[m], Hb[m])
-        return Wp + b_lo, Wp + b_hi
+        """:func:`tm.gate_paths.standing_boxes` of this rule's classes."""
+        return standing_boxes(self.classes, fleet, rows, ahead)
