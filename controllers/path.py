@@ -62,6 +62,7 @@ from __future__ import annotations
 import numpy as np
 
 from controllers.tolerances import PATH_COLLINEAR_TOL_M, PATH_DUP_TOL_M, PATH_LEAN_TOL_RAD
+from controllers.search_kernel import search_clipped
 
 __all__ = ["PathFrame", "PathStack", "PathError", "DEFAULT_PROJECTION_WINDOW_M"]
 
@@ -374,15 +375,20 @@ class PathStack:
         frame's ends extended; :meth:`PathFrame.segment`); broadcast together."""
         s = np.asarray(s, dtype=float)
         f = self._fid(fid, np.broadcast_shapes(np.shape(fid), s.shape))
-        j = np.searchsorted(self._start_g, s + self.offset[f], side="right") - 1
-        return np.clip(j, self.first[f], self.last[f])
+        # np.clip(searchsorted(_start_g, ..., "right") - 1, first, last), searched in the frame's rows alone
+        x = s + self.offset[f]
+        j = search_clipped(self._start_g, x.reshape(-1), self.first[f].reshape(-1) + 1, self.last[f].reshape(-1) + 1,
+                           "right")
+        return j.reshape(x.shape) - 1
 
     def first_meeting(self, fid, s_lo) -> np.ndarray:
         """The first segment of frame ``fid`` whose closed arc range reaches ``s_lo`` (its end
         ``>= s_lo``; the last segment beyond the route's end)."""
         f = np.asarray(fid, dtype=np.intp)
-        j = np.searchsorted(self._end_g, np.asarray(s_lo, dtype=float) + self.offset[f], side="left")
-        return np.clip(j, self.first[f], self.last[f])
+        x = np.asarray(s_lo, dtype=float) + self.offset[f]
+        f = np.broadcast_to(f, x.shape)  # (as numpy's clip broadcasts them)
+        return search_clipped(self._end_g, x.reshape(-1), self.first[f].reshape(-1), self.last[f].reshape(-1),
+                              "left").reshape(x.shape)
 
     def to_world(self, fid, s, n) -> tuple[np.ndarray, np.ndarray]:
         """World centres and body headings of path coordinates ``(s, n)`` on frames ``fid``

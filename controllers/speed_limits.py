@@ -30,6 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from controllers.search_kernel import search_clipped
 from controllers.settings import SettingsError
 
 __all__ = ["SpeedSettings", "RouteSpeeds", "route_speeds", "curvature", "bound_at", "free_flow_time", "plan_steps"]
@@ -287,8 +288,9 @@ def bound_at(arc: np.ndarray, bound: np.ndarray, env: np.ndarray, lane: np.ndarr
     lane_limit : ndarray, shape (V,)
         Lane limit of that gap.
     """
-    j = np.searchsorted(arc, s, side="right")                 # first row with arc > s: gap j holds s
-    j = np.clip(j, first + 1, last)
+    # first row with arc > s: gap j holds s (searched in each vehicle's own rows)
+    s = np.asarray(s, dtype=float)
+    j = search_clipped(arc, s.reshape(-1), np.asarray(first) + 1, last, "right").reshape(s.shape)
     nxt = np.minimum(j + 1, last)
     more = j < last
     ahead = np.maximum(arc[j] - s, 0.0)
