@@ -163,6 +163,17 @@ class _Group:
         row = self._wbuf[self.start + np.minimum(self.k + offset, self.K - 1)]
         return row[:, _WX:_WY + 1], row[:, _WH], self.k + offset < self.K
 
+    def stop_points(self, ahead: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """World waypoints ``idx = min(k + ahead, K - 1)`` (n, 2) of every vehicle, the headings of the
+        segments arriving there (n,) and at the waypoint after it (``min(idx + 1, K - 1)``): the floats
+        of ``W[i][idx]``, ``H[i][idx]`` and ``H[i][min(idx + 1, K - 1)]`` (the junction gate's stop
+        points, :attr:`tm.junctions.JunctionFleet.stops`), all at once."""
+        if not self.ids:
+            return np.zeros((0, 2)), np.zeros(0), np.zeros(0)
+        idx = np.minimum(self.k + ahead, self.K - 1)
+        row = self._wbuf[self.start + idx]
+        return row[:, _WX:_WY + 1], row[:, _WH], self._wbuf[self.start + np.minimum(idx + 1, self.K - 1), _WH]
+
     # ------------------------------------------------------------------ speed bounds
     def _along(self, X=None):
         """Centre arc (buffer-shifted) and along-road speed of every vehicle: the current

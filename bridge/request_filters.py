@@ -182,6 +182,18 @@ class RequestFilters:
         self.signal_book.count_crossings(cur.ids, front, row, s_line, self._link_state[slot])
 
     # -------------------------------------------------------------- junction tokens
+    def _stop_table(self, ahead: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Authority mode: every vehicle's waypoint ``min(k + ahead, K - 1)``, its headings there and at
+        the next, and its padding there, in fleet order (:attr:`tm.junctions.JunctionFleet.stops`): the
+        padding from the fleet claims' memo (:meth:`bridge.fleet_claims.FleetClaims.group_pads`, the
+        step's claims ask for ``ahead`` 0 and 1 too), which pads ``min(k + ahead, k_end)``: the same
+        waypoint, a route's arrival waypoint ``k_end`` being at most its last, ``K - 1``."""
+        live = live_groups(self.groups)
+        W, H_in, H_out = (np.concatenate(a) for a in zip(*(g.stop_points(ahead) for g in live)))
+        if any((g.k_end > g.K - 1).any() for g in live):  # (never: the waypoints above would not be the padded ones)
+            raise ValueError("RequestFilters: an arrival waypoint past its route's last")
+        return W, H_in, H_out, np.vstack([self.claims.group_pads(g, ahead) for g in live])
+
     def _gate(self, state: FleetState) -> FleetState:
         """Withhold requests into a zone guard whose token another vehicle holds (see
         :class:`tm.junctions.Zone`; authority mode: stop points past an entry line,
@@ -208,7 +220,8 @@ class RequestFilters:
         # authority mode: the oriented boxes of a vehicle's current claims, when a rule asks (tm.authority_gate)
         polys = partial(claim_polygons_of, self._claims_now) if self.authority else None
         fleet = JunctionFleet(state.ids, state.family, cur_lo, cur_hi,
-                              tuple((g.W, g.H, g.k) for g in live_groups(self.groups)), pads, polys)
+                              tuple((g.W, g.H, g.k) for g in live_groups(self.groups)), pads, polys,
+                              self._stop_table if self.authority else None)
         req = self.junctions.withhold(self.t, fleet, state.requesting, new_lo, new_hi)
         self._junction_fleet = fleet
         if not len(r):

@@ -190,11 +190,18 @@ class GatePaths:
         out = np.zeros(len(j), dtype=bool)
         if not len(j):
             return out
-        pts, tol = np.empty((len(j), 2)), np.empty(len(j))
-        for n, jj in enumerate(j.tolist()):
-            Wj, _, kj = fleet.route(jj)
-            pts[n] = Wj[min(kj + ahead, len(Wj) - 1)]
-            tol[n] = 0.6 * self.classes[fleet.family[jj]].delta
+        table = fleet.stop_table(ahead)
+        if table is not None:  # the whole fleet's stop points (JunctionFleet.stops)
+            pts = table[0][j]
+        else:
+            pts = np.empty((len(j), 2))
+            for n, jj in enumerate(j.tolist()):
+                Wj, _, kj = fleet.route(jj)
+                pts[n] = Wj[min(kj + ahead, len(Wj) - 1)]
+        fam = np.asarray(fleet.family)[j]
+        tol = np.empty(len(j))
+        for c in np.unique(fam).tolist():
+            tol[fam == c] = 0.6 * self.classes[c].delta
         u, inv = np.unique(rows, return_inverse=True)
         Ws = [fleet.route(r)[0] for r in u.tolist()]
         ch = [self._chunks(fleet, fleet.ids[r], W) for r, W in zip(u.tolist(), Ws)]
@@ -347,15 +354,19 @@ def standing_boxes(classes: Mapping[str, AuthorityReach], fleet: JunctionFleet, 
     n = len(rows)
     if not n:
         return np.zeros((0, 2)), np.zeros((0, 2))
-    routes = [fleet.route(j) for j in rows.tolist()]
-    k = np.array([r[2] for r in routes], dtype=np.intp)
-    last = np.array([len(r[0]) - 1 for r in routes], dtype=np.intp)
-    idx = np.minimum(k + ahead, last)
-    nxt = np.minimum(idx + 1, last)
-    Wp = np.array([r[0][i] for r, i in zip(routes, idx.tolist())], dtype=float).reshape(n, 2)
-    Ha = np.array([r[1][i] for r, i in zip(routes, idx.tolist())], dtype=float)
-    Hb = np.array([r[1][i] for r, i in zip(routes, nxt.tolist())], dtype=float)
-    pad = fleet.pad_rows(rows, idx)
+    table = fleet.stop_table(ahead)
+    if table is not None:  # the whole fleet's, at once (JunctionFleet.stops)
+        Wp, Ha, Hb, pad = (a[rows] for a in table)
+    else:
+        routes = [fleet.route(j) for j in rows.tolist()]
+        k = np.array([r[2] for r in routes], dtype=np.intp)
+        last = np.array([len(r[0]) - 1 for r in routes], dtype=np.intp)
+        idx = np.minimum(k + ahead, last)
+        nxt = np.minimum(idx + 1, last)
+        Wp = np.array([r[0][i] for r, i in zip(routes, idx.tolist())], dtype=float).reshape(n, 2)
+        Ha = np.array([r[1][i] for r, i in zip(routes, idx.tolist())], dtype=float)
+        Hb = np.array([r[1][i] for r, i in zip(routes, nxt.tolist())], dtype=float)
+        pad = fleet.pad_rows(rows, idx)
     b_lo, b_hi = np.empty((n, 2)), np.empty((n, 2))
     fam = np.asarray(fleet.family)[rows]
     for c in np.unique(fam).tolist():

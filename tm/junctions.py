@@ -134,6 +134,11 @@ class JunctionFleet:
         ``rows`` (int array) of the row each is of (M,), non-decreasing: the union of a row's boxes holds
         every current claim of that row (:func:`tm.reach.claim_polygons_of`); None: only the world
         boxes ``claim_lo, claim_hi`` are known.
+    stops : callable or None
+        ``stops(ahead) -> (W (n, 2), H_in (n,), H_out (n,), pads (n, 4))``: every row's waypoint
+        ``idx = min(k + ahead, K - 1)``, the headings at ``idx`` and ``min(idx + 1, K - 1)`` and the
+        padding there, the very floats :meth:`route` and :meth:`pad_rows` give, for the whole fleet
+        at once (:meth:`stop_table`); None: taken row by row.
     """
 
     ids: list
@@ -143,6 +148,7 @@ class JunctionFleet:
     parts: tuple
     pads: object = None
     claim_polygons: object = None
+    stops: object = None
 
     def __post_init__(self) -> None:
         # each row's part and place in it, for :meth:`route` (asked for millions of times a run)
@@ -150,6 +156,24 @@ class JunctionFleet:
         for W, H, k in self.parts:
             at.extend((W, H, k, i) for i in range(len(k)))
         object.__setattr__(self, "_at", at)
+        object.__setattr__(self, "_stop_tables", {})  # ahead -> stop_table(ahead)
+
+    def stop_table(self, ahead: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+        """:attr:`stops` ``(ahead)``, asked once per fleet and ``ahead``, its padding checked as
+        :meth:`pad_rows` checks it; None without :attr:`stops`."""
+        if self.stops is None:
+            return None
+        got = self._stop_tables.get(ahead)
+        if got is None:
+            W, H_in, H_out, p = self.stops(ahead)
+            n = len(self.ids)
+            p = np.asarray(p, dtype=float)
+            if p.shape != (n, 4) or not np.all(np.isfinite(p) & (p >= 0)):
+                raise ValueError(f"JunctionFleet.stops: need finite pads >= 0 of shape ({n}, 4), got shape {p.shape}")
+            got = self._stop_tables[ahead] = (np.asarray(W, dtype=float).reshape(n, 2),
+                                              np.asarray(H_in, dtype=float).reshape(n),
+                                              np.asarray(H_out, dtype=float).reshape(n), p)
+        return got
 
     def pad(self, row: int, idx: np.ndarray) -> np.ndarray:
         """The padding (m, 4) ``(back, front, right, left)`` of row ``row`` at waypoints ``idx``

@@ -275,3 +275,26 @@ def test_crossing_takes_tokens_in_order_with_the_timed_check(check):
         written = json.loads((Path(d) / "summary.json").read_text())
     assert written["safe"] is True and written["vehicles_arrived"] == 8
     assert (written["junction_ordered"] > 0) is (check == "timed")
+
+
+def test_stop_tables_are_the_routes_and_pads_row_by_row():
+    """The junction gate's stop tables (:meth:`bridge.request_filters.RequestFilters._stop_table`: the groups'
+    :meth:`~bridge.groups._Group.stop_points` and the fleet claims' padding memo) hold, for every row,
+    the floats its route and its padding lookup give one row at a time, at several steps of a crossing."""
+    specs, zones = crossing(2, "car", 3.0, headway_s=1.5)
+    sim = Cosim(CLASSES, specs, CosimSettings(controller="authority", seed=1), zones=zones)
+    checked = 0
+    for _ in range(300):
+        sim.step()
+        fleet = getattr(sim.filters, "_junction_fleet", None)
+        if fleet is None or not len(fleet.ids) or sim.t % 25:
+            continue
+        for ahead in (0, 1, 2):
+            W, Hi, Ho, P = fleet.stop_table(ahead)
+            for r in range(len(fleet.ids)):
+                Wr, Hr, k = fleet.route(r)
+                i = min(k + ahead, len(Wr) - 1)
+                assert np.array_equal(W[r], Wr[i]) and Hi[r] == Hr[i] and Ho[r] == Hr[min(i + 1, len(Wr) - 1)]
+                assert np.array_equal(P[r], fleet.pad_rows(np.array([r]), np.array([i]))[0])
+            checked += 1
+    assert checked

@@ -114,3 +114,51 @@ def test_standing_many_keeps_the_boxes_standing_box_gives():
     other = JunctionFleet(fleet.ids, fleet.family, fleet.claim_lo, fleet.claim_hi, fleet.parts)
     paths.standing_many(other, np.array([5]))
     assert paths._stand_memo[0] is other and list(paths._stand_memo[1]) == [5]
+
+
+def _with_stops(fleet, pads):
+    """``fleet`` with :attr:`JunctionFleet.stops` taken one row at a time from its routes and ``pads``
+    (the reference the whole-fleet tables must match)."""
+    def stops(ahead):
+        W, Hi, Ho, idx = [], [], [], []
+        for r in range(len(fleet.ids)):
+            Wr, Hr, k = fleet.route(r)
+            i = min(k + ahead, len(Wr) - 1)
+            W.append(Wr[i])
+            Hi.append(Hr[i])
+            Ho.append(Hr[min(i + 1, len(Wr) - 1)])
+            idx.append(i)
+        rows = np.arange(len(fleet.ids))
+        return np.array(W), np.array(Hi), np.array(Ho), pads(rows, np.array(idx))
+    return JunctionFleet(fleet.ids, fleet.family, fleet.claim_lo, fleet.claim_hi, fleet.parts, pads=pads,
+                         stops=stops)
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_stop_tables_give_the_boxes_and_routes_row_by_row(seed):
+    """:func:`standing_boxes` and :meth:`GatePaths.on_routes` from the fleet's stop tables
+    (:attr:`JunctionFleet.stops`) give the floats and answers they give row by row."""
+    from tm.gate_paths import standing_boxes
+
+    rng = np.random.default_rng(seed)
+    fleet, routes = _fleet(rng, 16)
+    for W, H, k in routes:
+        H[:] = rng.uniform(-np.pi, np.pi, len(H))
+
+    def pads(rows, idx):
+        return np.column_stack([0.1 * rows, 0.01 * idx, 0.2 + 0 * rows, 0.3 * (idx % 3)])
+    plain = JunctionFleet(fleet.ids, fleet.family, fleet.claim_lo, fleet.claim_hi, fleet.parts, pads=pads)
+    tabled = _with_stops(plain, pads)
+    classes = {"car": CAR, "bike": BIKE}
+    paths = GatePaths(classes, spans=None)
+    for ahead in (0, 1, 3):
+        rows = rng.integers(0, 16, 12)
+        for a, b in zip(standing_boxes(classes, plain, rows, ahead), standing_boxes(classes, tabled, rows, ahead)):
+            assert np.array_equal(a, b)
+        rs, js = rng.integers(0, 16, 50), rng.integers(0, 16, 50)
+        assert np.array_equal(paths.on_routes(plain, rs, js, ahead), paths.on_routes(tabled, rs, js, ahead))
+    assert tabled.stop_table(1) is tabled.stop_table(1)  # asked once per fleet
+    bad = JunctionFleet(fleet.ids, fleet.family, fleet.claim_lo, fleet.claim_hi, fleet.parts,
+                        stops=lambda ahead: (np.zeros((16, 2)), np.zeros(16), np.zeros(16), -np.ones((16, 4))))
+    with pytest.raises(ValueError):
+        bad.stop_table(0)
