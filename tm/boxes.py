@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from controllers.tolerances import GEOMETRY_TOL, SWEEP_MARGIN
-from tm.kernels import sets_meet
+from tm.kernels import any_boxes_meet, sets_meet
 
 __all__ = ["BoxGrid", "GuardIndex", "corridor_hits", "box_pairs_meet", "boxes_meet", "polygons_meet",
            "polygon_sets_meet", "ranges"]
@@ -131,7 +131,13 @@ def box_pairs_meet(lo1: np.ndarray, hi1: np.ndarray, lo2: np.ndarray, hi2: np.nd
 
 
 def boxes_meet(lo1: np.ndarray, hi1: np.ndarray, lo2: np.ndarray, hi2: np.ndarray) -> bool:
-    """Whether any box ``(lo1[i], hi1[i])`` meets any box ``(lo2[j], hi2[j])`` (touching counts)."""
+    """Whether any box ``(lo1[i], hi1[i])`` meets any box ``(lo2[j], hi2[j])`` (touching counts):
+    ``np.any(box_pairs_meet(...))``, in one compiled loop (:func:`tm.kernels.any_boxes_meet`) for
+    float boxes of one shape per side (else as :func:`box_pairs_meet`)."""
+    lo1, hi1, lo2, hi2 = (np.asarray(a) for a in (lo1, hi1, lo2, hi2))
+    if (lo1.ndim == hi1.ndim == lo2.ndim == hi2.ndim == 2 and lo1.shape == hi1.shape and lo2.shape == hi2.shape
+            and lo1.shape[1] == lo2.shape[1] and all(a.dtype == np.float64 for a in (lo1, hi1, lo2, hi2))):
+        return bool(any_boxes_meet(lo1, hi1, lo2, hi2))
     return bool(np.any(box_pairs_meet(lo1, hi1, lo2, hi2)))
 
 

@@ -25,7 +25,7 @@ from numba import njit
 
 __all__ = ["timed_pairs_plain", "timed_pairs_tight", "reach_boxes", "grid_pairs", "union_bounds", "slot_bounds", "path_slots",
            "cover_boxes", "cover_frame_bounds", "best_assignments", "stop_closure", "min_labels",
-           "greedy_tables", "greedy_stops", "merge_rows", "sets_meet"]
+           "greedy_tables", "greedy_stops", "merge_rows", "sets_meet", "any_boxes_meet"]
 
 
 @njit(cache=True, inline="always")
@@ -738,3 +738,21 @@ def sets_meet(P, p_start, p_count, Q, q_start, q_count, tol):
             if out[t]:
                 break
     return out
+
+
+@njit(cache=True)
+def any_boxes_meet(lo1, hi1, lo2, hi2):
+    """Whether some box ``(lo1[i], hi1[i])`` meets some ``(lo2[j], hi2[j])`` on every axis (touching
+    counts; a NaN bound meets nothing), all (n, d) / (m, d): :func:`tm.boxes.boxes_meet`, the same
+    comparisons one pair at a time, stopping at the first pair that meets (numpy compares every
+    pair: the junction gate asks tens of thousands of times a step, of corridors of a few boxes)."""
+    for i in range(lo1.shape[0]):
+        for j in range(lo2.shape[0]):
+            meet = True
+            for a in range(lo1.shape[1]):
+                if not (lo1[i, a] <= hi2[j, a] and hi1[i, a] >= lo2[j, a]):
+                    meet = False
+                    break
+            if meet:
+                return True
+    return False

@@ -8,7 +8,7 @@ shared edges and corners occur.
 import numpy as np
 from hypothesis import example, given, settings, strategies as st
 
-from tm.boxes import BoxGrid, GuardIndex, boxes_meet, corridor_hits
+from tm.boxes import BoxGrid, GuardIndex, box_pairs_meet, boxes_meet, corridor_hits
 
 
 def _dense(q_lo, q_hi, b_lo, b_hi):
@@ -145,3 +145,27 @@ def test_polygon_sets_meet_counts_touching_and_not_a_gap_beyond_the_tolerance():
     P = square[None]
     assert polygon_sets_meet(P, [0, 0], [1, 0], P, [0, 0], [1, 1]).tolist() == [True, False]
     assert polygon_sets_meet(np.zeros((0, 4, 2)), [0], [0], P, [0], [1]).tolist() == [False]
+
+
+@settings(max_examples=300, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), n=st.integers(0, 6), m=st.integers(0, 6), nan=st.booleans(),
+       grid=st.booleans())
+def test_boxes_meet_compiled_is_the_dense_test(seed, n, m, nan, grid):
+    """:func:`boxes_meet` (compiled, first meeting pair) against ``np.any(box_pairs_meet(...))`` on
+    random boxes: touching (integer corners), NaN bounds, empty sides, strided and (1, 2) views."""
+    rng = np.random.default_rng(seed)
+
+    def boxes(k):
+        lo = rng.integers(-4, 4, (k, 2)).astype(float) if grid else rng.normal(size=(k, 2)) * 3
+        hi = lo + (rng.integers(0, 3, (k, 2)) if grid else rng.uniform(0, 2, (k, 2)))
+        if nan and k:
+            lo[rng.integers(0, k), rng.integers(0, 2)] = np.nan
+        return lo, hi
+    lo1, hi1 = boxes(n)
+    lo2, hi2 = boxes(m)
+    want = bool(np.any(box_pairs_meet(lo1, hi1, lo2, hi2)))
+    assert boxes_meet(lo1, hi1, lo2, hi2) is want
+    wide = np.hstack([lo1, hi1])  # strided views of the same boxes
+    assert boxes_meet(wide[:, :2], wide[:, 2:], lo2, hi2) is want
+    if m:
+        assert boxes_meet(lo1, hi1, lo2[:1], hi2[:1]) is bool(np.any(box_pairs_meet(lo1, hi1, lo2[:1], hi2[:1])))
