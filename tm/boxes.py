@@ -12,9 +12,9 @@ from __future__ import annotations
 import numpy as np
 
 from controllers.tolerances import GEOMETRY_TOL, SWEEP_MARGIN
-from tm.kernels import any_boxes_meet, sets_meet
+from tm.kernels import any_boxes_meet, rows_meet_any, sets_meet
 
-__all__ = ["BoxGrid", "GuardIndex", "corridor_hits", "box_pairs_meet", "boxes_meet", "polygons_meet",
+__all__ = ["BoxGrid", "GuardIndex", "corridor_hits", "box_pairs_meet", "boxes_meet", "meets_any", "polygons_meet",
            "polygon_sets_meet", "ranges"]
 
 
@@ -130,13 +130,28 @@ def box_pairs_meet(lo1: np.ndarray, hi1: np.ndarray, lo2: np.ndarray, hi2: np.nd
     return np.all((lo1[:, None, :] <= hi2[None]) & (hi1[:, None, :] >= lo2[None]), axis=2)
 
 
+def _compiled(lo1, hi1, lo2, hi2) -> bool:
+    """Whether the compiled box loops take these: float (n, d) / (m, d) boxes, one shape per side."""
+    return (lo1.ndim == hi1.ndim == lo2.ndim == hi2.ndim == 2 and lo1.shape == hi1.shape and lo2.shape == hi2.shape
+            and lo1.shape[1] == lo2.shape[1] and all(a.dtype == np.float64 for a in (lo1, hi1, lo2, hi2)))
+
+
+def meets_any(lo1: np.ndarray, hi1: np.ndarray, lo2: np.ndarray, hi2: np.ndarray) -> np.ndarray:
+    """(n,) bool: whether box ``(lo1[i], hi1[i])`` meets some box ``(lo2[j], hi2[j])`` (touching counts):
+    ``box_pairs_meet(...).any(axis=1)``, in one compiled loop (:func:`tm.kernels.rows_meet_any`) that
+    stops at each row's first meeting box, for the shapes :func:`boxes_meet` compiles."""
+    lo1, hi1, lo2, hi2 = (np.asarray(a) for a in (lo1, hi1, lo2, hi2))
+    if _compiled(lo1, hi1, lo2, hi2):
+        return rows_meet_any(lo1, hi1, lo2, hi2)
+    return np.any(box_pairs_meet(lo1, hi1, lo2, hi2), axis=1)
+
+
 def boxes_meet(lo1: np.ndarray, hi1: np.ndarray, lo2: np.ndarray, hi2: np.ndarray) -> bool:
     """Whether any box ``(lo1[i], hi1[i])`` meets any box ``(lo2[j], hi2[j])`` (touching counts):
     ``np.any(box_pairs_meet(...))``, in one compiled loop (:func:`tm.kernels.any_boxes_meet`) for
     float boxes of one shape per side (else as :func:`box_pairs_meet`)."""
     lo1, hi1, lo2, hi2 = (np.asarray(a) for a in (lo1, hi1, lo2, hi2))
-    if (lo1.ndim == hi1.ndim == lo2.ndim == hi2.ndim == 2 and lo1.shape == hi1.shape and lo2.shape == hi2.shape
-            and lo1.shape[1] == lo2.shape[1] and all(a.dtype == np.float64 for a in (lo1, hi1, lo2, hi2))):
+    if _compiled(lo1, hi1, lo2, hi2):
         return bool(any_boxes_meet(lo1, hi1, lo2, hi2))
     return bool(np.any(box_pairs_meet(lo1, hi1, lo2, hi2)))
 

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from controllers.tolerances import SWEEP_MARGIN
-from tm.boxes import BoxGrid, GuardIndex, boxes_meet, corridor_hits
+from tm.boxes import BoxGrid, GuardIndex, boxes_meet, corridor_hits, meets_any
 
 __all__ = ["Zone", "ClassReach", "JunctionFleet", "JunctionGate"]
 
@@ -603,7 +603,7 @@ class JunctionGate:
         lo, hi = centre[q] - r, centre[q] + r
         if boxes is not None:
             lo, hi = np.minimum(lo, boxes[0][q]), np.maximum(hi, boxes[1][q])
-        meet = np.any(np.all((lo[:, None, :] <= h_hi[None]) & (hi[:, None, :] >= h_lo[None]), axis=2), axis=1)
+        meet = meets_any(lo, hi, h_lo, h_hi)
         ok = ok.copy()
         ok[q[meet]] = False
         return ok

@@ -25,7 +25,8 @@ from numba import njit
 
 __all__ = ["timed_pairs_plain", "timed_pairs_tight", "reach_boxes", "grid_pairs", "union_bounds", "slot_bounds", "path_slots",
            "cover_boxes", "cover_frame_bounds", "best_assignments", "stop_closure", "min_labels",
-           "greedy_tables", "greedy_stops", "merge_rows", "sets_meet", "any_boxes_meet"]
+           "greedy_tables", "greedy_stops", "merge_rows", "sets_meet", "any_boxes_meet",
+           "rows_meet_any"]
 
 
 @njit(cache=True, inline="always")
@@ -756,3 +757,22 @@ def any_boxes_meet(lo1, hi1, lo2, hi2):
             if meet:
                 return True
     return False
+
+
+@njit(cache=True)
+def rows_meet_any(lo1, hi1, lo2, hi2):
+    """Per box ``i`` of ``(lo1, hi1)`` (n, d): whether it meets some box of ``(lo2, hi2)`` (m, d),
+    touching counting, NaN meeting nothing (:func:`tm.boxes.meets_any`): :func:`any_boxes_meet`
+    row by row."""
+    out = np.zeros(lo1.shape[0], dtype=np.bool_)
+    for i in range(lo1.shape[0]):
+        for j in range(lo2.shape[0]):
+            meet = True
+            for a in range(lo1.shape[1]):
+                if not (lo1[i, a] <= hi2[j, a] and hi1[i, a] >= lo2[j, a]):
+                    meet = False
+                    break
+            if meet:
+                out[i] = True
+                break
+    return out

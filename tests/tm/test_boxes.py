@@ -8,7 +8,7 @@ shared edges and corners occur.
 import numpy as np
 from hypothesis import example, given, settings, strategies as st
 
-from tm.boxes import BoxGrid, GuardIndex, box_pairs_meet, boxes_meet, corridor_hits
+from tm.boxes import BoxGrid, GuardIndex, box_pairs_meet, boxes_meet, corridor_hits, meets_any
 
 
 def _dense(q_lo, q_hi, b_lo, b_hi):
@@ -150,8 +150,8 @@ def test_polygon_sets_meet_counts_touching_and_not_a_gap_beyond_the_tolerance():
 @settings(max_examples=300, deadline=None)
 @given(seed=st.integers(0, 2**32 - 1), n=st.integers(0, 6), m=st.integers(0, 6), nan=st.booleans(),
        grid=st.booleans())
-def test_boxes_meet_compiled_is_the_dense_test(seed, n, m, nan, grid):
-    """:func:`boxes_meet` (compiled, first meeting pair) against ``np.any(box_pairs_meet(...))`` on
+def test_boxes_meet_and_meets_any_compiled_are_the_dense_test(seed, n, m, nan, grid):
+    """:func:`boxes_meet` and :func:`meets_any` (compiled, first meeting pair) against the dense test on
     random boxes: touching (integer corners), NaN bounds, empty sides, strided and (1, 2) views."""
     rng = np.random.default_rng(seed)
 
@@ -169,3 +169,6 @@ def test_boxes_meet_compiled_is_the_dense_test(seed, n, m, nan, grid):
     assert boxes_meet(wide[:, :2], wide[:, 2:], lo2, hi2) is want
     if m:
         assert boxes_meet(lo1, hi1, lo2[:1], hi2[:1]) is bool(np.any(box_pairs_meet(lo1, hi1, lo2[:1], hi2[:1])))
+    rows = meets_any(lo1, hi1, lo2, hi2)  # per row, the same comparisons
+    assert rows.dtype == bool and np.array_equal(rows, np.any(box_pairs_meet(lo1, hi1, lo2, hi2), axis=1))
+    assert np.array_equal(meets_any(wide[:, :2], wide[:, 2:], lo2, hi2), rows)
