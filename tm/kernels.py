@@ -741,6 +741,16 @@ def sets_meet(P, p_start, p_count, Q, q_start, q_count, tol):
     return out
 
 
+@njit(cache=True, inline="always")
+def _pair_meets(lo1, hi1, i, lo2, hi2, j):
+    """Whether box ``i`` of ``(lo1, hi1)`` meets box ``j`` of ``(lo2, hi2)`` on every axis (touching
+    counts; a NaN bound meets nothing)."""
+    for a in range(lo1.shape[1]):
+        if not (lo1[i, a] <= hi2[j, a] and hi1[i, a] >= lo2[j, a]):
+            return False
+    return True
+
+
 @njit(cache=True)
 def any_boxes_meet(lo1, hi1, lo2, hi2):
     """Whether some box ``(lo1[i], hi1[i])`` meets some ``(lo2[j], hi2[j])`` on every axis (touching
@@ -749,12 +759,7 @@ def any_boxes_meet(lo1, hi1, lo2, hi2):
     pair: the junction gate asks tens of thousands of times a step, of corridors of a few boxes)."""
     for i in range(lo1.shape[0]):
         for j in range(lo2.shape[0]):
-            meet = True
-            for a in range(lo1.shape[1]):
-                if not (lo1[i, a] <= hi2[j, a] and hi1[i, a] >= lo2[j, a]):
-                    meet = False
-                    break
-            if meet:
+            if _pair_meets(lo1, hi1, i, lo2, hi2, j):
                 return True
     return False
 
@@ -767,12 +772,7 @@ def rows_meet_any(lo1, hi1, lo2, hi2):
     out = np.zeros(lo1.shape[0], dtype=np.bool_)
     for i in range(lo1.shape[0]):
         for j in range(lo2.shape[0]):
-            meet = True
-            for a in range(lo1.shape[1]):
-                if not (lo1[i, a] <= hi2[j, a] and hi1[i, a] >= lo2[j, a]):
-                    meet = False
-                    break
-            if meet:
+            if _pair_meets(lo1, hi1, i, lo2, hi2, j):
                 out[i] = True
                 break
     return out
