@@ -13,20 +13,9 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from controllers.search_kernel import bisect
+
 __all__ = ["sample_range", "path_pad_run", "path_pads_many", "nearest_on_segments"]
-
-
-@njit(cache=True)
-def _search(sig, x, right):
-    """``np.searchsorted(sig, x, side="right" if right else "left")``."""
-    lo, hi = 0, len(sig)
-    while lo < hi:
-        m = (lo + hi) >> 1
-        if sig[m] < x or (right and sig[m] == x):
-            lo = m + 1
-        else:
-            hi = m
-    return lo
 
 
 @njit(cache=True)
@@ -35,8 +24,8 @@ def sample_range(sig, arc, box_lo, box_hi):
     ``arc`` (:meth:`bridge.sumo_body.PadTable._path_run`): bisection on ``arc + bound``, then the
     rounding's +-1 settled on the comparison itself."""
     n = len(sig)
-    lo = _search(sig, arc + box_lo, False)
-    hi = _search(sig, arc + box_hi, True)
+    lo = bisect(sig, arc + box_lo, 0, n, False)
+    hi = bisect(sig, arc + box_hi, 0, n, True)
     if lo > 0 and sig[max(lo - 1, 0)] - arc >= box_lo:
         lo -= 1
     if lo < n and sig[min(lo, n - 1)] - arc < box_lo:

@@ -187,11 +187,10 @@ class RequestFilters:
         the next, and its padding there, in fleet order (:attr:`tm.junctions.JunctionFleet.stops`): the
         padding from the fleet claims' memo (:meth:`bridge.fleet_claims.FleetClaims.group_pads`, the
         step's claims ask for ``ahead`` 0 and 1 too), which pads ``min(k + ahead, k_end)``: the same
-        waypoint, a route's arrival waypoint ``k_end`` being at most its last, ``K - 1``."""
+        waypoint, a route's arrival waypoint ``k_end`` being at most its last, ``K - 1``
+        (the co-simulation checks every spec's ``arrive_k`` when it starts: ``1 .. K - 2``)."""
         live = live_groups(self.groups)
         W, H_in, H_out = (np.concatenate(a) for a in zip(*(g.stop_points(ahead) for g in live)))
-        if any((g.k_end > g.K - 1).any() for g in live):  # (never: the waypoints above would not be the padded ones)
-            raise ValueError("RequestFilters: an arrival waypoint past its route's last")
         return W, H_in, H_out, np.vstack([self.claims.group_pads(g, ahead) for g in live])
 
     def _gate(self, state: FleetState) -> FleetState:

@@ -17,7 +17,22 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["search_clipped"]
+__all__ = ["search_clipped", "bisect"]
+
+
+@njit(cache=True)
+def bisect(a, v, b0, b1, right):
+    """The first row of ``a[b0:b1]`` (sorted) past ``v`` (``right``: ``a > v``; else ``a >= v``), else
+    ``b1``: ``np.searchsorted(a[b0:b1], v, side) + b0`` for a number ``v``; a NaN ``v`` fails every
+    comparison: ``b1`` (numpy sorts NaN last).  Compiled; for compiled callers (:func:`search_clipped`,
+    :func:`bridge.body_kernels.sample_range`)."""
+    while b0 < b1:
+        m = (b0 + b1) // 2
+        if (a[m] > v) if right else (a[m] >= v):
+            b1 = m
+        else:
+            b0 = m + 1
+    return b0
 
 
 @njit(cache=True)
@@ -25,17 +40,8 @@ def _search_clipped(a, x, lo, hi, right):
     n = len(x)
     out = np.empty(n, dtype=np.intp)
     for q in range(n):
-        b0, b1, v = lo[q], hi[q], x[q]
-        if b0 >= b1:  # numpy's clip: the upper bound wins
-            out[q] = b1
-            continue
-        while b0 < b1:  # the first row in [lo, hi) past v (right: a > v; left: a >= v), else hi
-            m = (b0 + b1) // 2
-            if (a[m] > v) if right else (a[m] >= v):
-                b1 = m
-            else:
-                b0 = m + 1
-        out[q] = b0
+        # numpy's clip: with lo >= hi the upper bound wins (bisect returns it untouched)
+        out[q] = bisect(a, x[q], lo[q], hi[q], right) if lo[q] < hi[q] else hi[q]
     return out
 
 

@@ -35,3 +35,19 @@ def test_scalar_bounds_and_checks():
         search_clipped(a, x, 0, 11)
     with pytest.raises(ValueError):
         search_clipped(a, x, 0, 5, "middle")
+
+
+@settings(max_examples=200, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), R=st.integers(0, 40), dup=st.booleans(), right=st.booleans())
+def test_bisect_is_searchsorted_of_the_slice(seed, R, dup, right):
+    """The compiled scalar search (shared by search_clipped and bridge.body_kernels.sample_range) gives
+    numpy's answer on the slice ``a[b0:b1]`` plus ``b0``, NaN last (``b1``); exact integers, no tolerance."""
+    from controllers.search_kernel import bisect
+
+    rng = np.random.default_rng(seed)
+    a = np.sort(rng.integers(0, 6, R).astype(float) if dup else rng.normal(size=R) * 10)
+    b0, b1 = sorted(rng.integers(0, R + 1, 2).tolist())
+    side = "right" if right else "left"
+    for v in np.r_[a, rng.normal(size=4) * 12, [np.nan, np.inf, -np.inf]]:
+        want = int(np.searchsorted(a[b0:b1], v, side=side)) + b0
+        assert bisect(a, float(v), b0, b1, right) == want
