@@ -51,10 +51,15 @@ _CLI_WITH_SIGINT = ("import runpy, signal; signal.signal(signal.SIGINT, signal.d
 
 
 def _start(args, out):
+    """The run, its temporary files (SUMO's work directory, ``tempfile``) under ``out``'s parent's
+    ``tmp``: a run killed with SIGKILL cannot remove them (they went to /tmp for good before)."""
+    tmp = out.parent / "tmp"
+    tmp.mkdir(parents=True, exist_ok=True)
     # -X faulthandler: a SIGABRT makes the child print every thread's stack (see _end_after_sigint)
     return subprocess.Popen([sys.executable, "-X", "faulthandler", "-c", _CLI_WITH_SIGINT, "run", *args, "--out",
                              str(out), "--quiet"],
-                            cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                            cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env={**os.environ, "TMPDIR": str(tmp)})
 
 
 def _end_after_sigint(proc, timeout_s: float = 60.0) -> str:
@@ -128,6 +133,7 @@ def test_ctrl_c_ends_with_one_line_and_exit_130(tmp_path, scenario):
     assert s["interrupted"] is True and s["complete"] is False
     assert float(lines[0].split("t = ")[1].split(" s")[0]) == s["simulated_s"] >= 2.0
     assert len(pd.read_csv(out / "steps.csv")) == s["steps"]
+    assert not list((tmp_path / "tmp").iterdir())  # SUMO's work directory removed on Ctrl-C too
 
 
 def test_arrived_vehicles_and_summary_are_on_disk_while_the_run_goes(tmp_path):
