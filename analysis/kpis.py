@@ -304,7 +304,9 @@ def run_tables(sim, tripinfo=None) -> tuple[dict, pd.DataFrame, pd.DataFrame]:
         ``junction_withheld`` (requests withheld for want of one) and ``junction_chain_revoked``
         (tokens taken back in the hand-out because a chained zone's was not free,
         :meth:`tm.authority_gate.AuthorityGate._hand_out`) and ``junction_ordered`` (tokens taken after
-        holders whose corridors the taker's meets: ordered entry, :meth:`tm.authority_gate.AuthorityGate._after`).
+        holders whose corridors the taker's meets: ordered entry, :meth:`tm.authority_gate.AuthorityGate._after`),
+        and at the last step ``stopped_at_end``, ``gridlocked_at_end``, ``wait_cycles``
+        (:func:`analysis.waits.wait_figures`).
     steps, vehicles : DataFrame
     """
     from controllers.classes import builtin_classes
@@ -335,8 +337,10 @@ def run_tables(sim, tripinfo=None) -> tuple[dict, pd.DataFrame, pd.DataFrame]:
         body_window_exits=int(getattr(sim, "body_window_exits", 0)),
         constraint_violations=int(sim.constraint_violations))
     from analysis.safety import verdict
+    from analysis.waits import wait_figures, waits_at_end
 
     figures.update(verdict(figures))
+    figures.update(wait_figures(waits_at_end(sim)))
     gate = getattr(sim, "junctions", None)  # the junction liveness layer (tm.junctions, tm.authority_gate)
     if gate is not None:
         figures.update(zones=len(gate.zones), zones_ignored=int(getattr(sim, "zones_ignored", 0)),

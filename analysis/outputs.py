@@ -2,7 +2,8 @@
 
 ``steps.csv`` (one row per step), ``steps_1s.csv`` (the same aggregated per
 simulated second, for long runs) and ``vehicles.csv`` (one row per vehicle); see
-:mod:`analysis.kpis` for the columns.
+:mod:`analysis.kpis` for the columns.  At the end, ``waits.csv``: every vehicle at rest and why
+(:mod:`analysis.waits`).
 
 Nothing is lost on a crash: :class:`StreamingOutputs`, an observer of the loop,
 appends every step's row to ``steps.csv`` and the row of every vehicle that
@@ -21,6 +22,7 @@ import os
 from pathlib import Path
 
 from analysis.kpis import STEP_COLUMNS, VEHICLE_COLUMNS, per_second, run_tables, vehicle_table
+from analysis.waits import waits_at_end
 
 __all__ = ["write_run_tables", "close_observers", "write_summary", "StreamingOutputs", "STREAM_STEP_COLUMNS"]
 
@@ -67,6 +69,7 @@ def write_run_tables(out, sim, tripinfo=None) -> dict:
     _replace_csv(steps, out / "steps.csv")
     _replace_csv(per_second(steps), out / "steps_1s.csv")
     _replace_csv(vehicles, out / "vehicles.csv")
+    _replace_csv(waits_at_end(sim), out / "waits.csv")
     return figures
 
 

@@ -25,7 +25,8 @@ _COUNT_NAMES = ("vehicles", "vehicles_total", "vehicles_arrived", "steps", "coll
                 "crossing_withheld",
                 "persons_arrived", "vehicles_undrivable", "claim_violations", "footprint_overlaps", "zones",
                 "zones_ignored", "junction_tokens", "junction_given_back", "junction_withheld",
-                "junction_chain_revoked", "junction_ordered", "vehicles_over_limit")
+                "junction_chain_revoked", "junction_ordered", "vehicles_over_limit", "stopped_at_end",
+                "gridlocked_at_end", "wait_cycles")
 
 
 def decimals_for(name: str, statistic: str = "") -> int:

@@ -356,7 +356,8 @@ def report_path(a: RunData, b: RunData | None = None) -> Path:
 
 
 #: Rows of the closing table of ``muvsim run`` (names as in ``summary.json``).
-SUMMARY_ROWS = ("scenario", "baseline", "seed", "vehicles_arrived", "stop_reason", "simulated_s", "steps",
+SUMMARY_ROWS = ("scenario", "baseline", "seed", "vehicles_arrived", "stop_reason", "gridlocked_at_end", "simulated_s",
+                "steps",
                 "collisions_sumo", "collisions_geometric", "invariant_violations", "constraint_violations",
                 "min_separation_m", "stop_commands", "mean_travel_time_s", "mean_delay_s", "throughput_vph",
                 "speed_limit_excess_max", "vehicles_over_limit", "red_violations", "rtf", "wall_s", "error")
@@ -391,6 +392,9 @@ def format_summary(summary: dict) -> str:
             text = fmt(v, k) if v is not None and v != float("inf") else "never two vehicles at once"
         elif k == "rtf":
             text = fmt(v, k) + "  (simulated s per wall s)" if v is not None else "-"
+        elif k == "gridlocked_at_end" and v is not None:
+            text = (f"{int(v)} of the {int(s.get('stopped_at_end', 0))} vehicles at rest wait on a circle of waits "
+                    f"({int(s.get('wait_cycles', 0))} cycle(s); waits.csv says who waits for whom)")
         else:
             text = fmt(v, k)
         rows.append((k, text))

@@ -32,8 +32,8 @@ import pandas as pd
 
 GAME = ("cross", "square", "grid6", "corridor", "ramp", "fkk_in", "A10KW", "bs3d", "fokr_bs_demo")
 GENERATED = ("tlsgrid",)  # made into the runs directory by sumo_nets.tls_grid
-COLUMNS = ["scenario", "driver", "controller", "duration_s", "complete", "demand", "undrivable", "arrived", "mean_delay_s",
-           "mean_travel_time_s", "halt_episodes", "collisions_sumo", "collisions_geometric",
+COLUMNS = ["scenario", "driver", "controller", "duration_s", "complete", "demand", "undrivable", "arrived", "stopped_at_end",
+           "gridlocked_at_end", "mean_delay_s", "mean_travel_time_s", "halt_episodes", "collisions_sumo", "collisions_geometric",
            "invariant_violations", "signals", "red_violations", "rtf", "wall_s", "error"]
 
 
@@ -43,6 +43,7 @@ def _row(name: str, driver: str, controller: str, duration: float, out: Path, rc
     demand = s.get("vehicles_total")  # None for SUMO's drivers: the caller fills in muvsim's (the same demand)
     return {"scenario": name, "driver": driver, "controller": controller, "duration_s": duration, "complete": bool(s.get("complete")),
             "demand": demand, "undrivable": s.get("vehicles_undrivable"), "arrived": s.get("vehicles_arrived"),
+            "stopped_at_end": s.get("stopped_at_end"), "gridlocked_at_end": s.get("gridlocked_at_end"),
             "mean_delay_s": s.get("mean_delay_s"), "mean_travel_time_s": s.get("mean_travel_time_s"),
             "halt_episodes": s.get("halt_episodes"), "collisions_sumo": s.get("collisions_sumo"),
             "collisions_geometric": s.get("collisions_geometric"),

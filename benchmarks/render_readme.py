@@ -89,6 +89,13 @@ def _pair(a, b, fmt) -> str:
     return f"{fmt(a)} / {fmt(b)}"
 
 
+def _of(part, whole) -> str:
+    """``part of whole`` (counts), ``-`` where either is missing (a run before the column existed)."""
+    if any(v is None or (isinstance(v, float) and math.isnan(v)) for v in (part, whole)):
+        return "-"
+    return f"{int(part)} of {int(whole)}"
+
+
 def scenarios_table(csv: Path = RESULTS / "scenarios.csv") -> str:
     """One row per scenario and muvsim controller: muvsim's figures beside SUMO's drivers' (the rows of
     ``driver`` muvsim, sumo).  ``controller`` paper (or no such column): the row is the scenario's name;
@@ -97,10 +104,11 @@ def scenarios_table(csv: Path = RESULTS / "scenarios.csv") -> str:
     if "controller" not in df:
         df["controller"] = "paper"
     df["controller"] = df["controller"].where(df["driver"] == "muvsim", "-").fillna("paper")
-    head = ("| scenario | window (s) | demand | arrived muvsim / SUMO | mean delay muvsim / SUMO (s) "
+    head = ("| scenario | window (s) | demand | arrived muvsim / SUMO | at rest at the end: gridlocked of all "
+            "(muvsim) | mean delay muvsim / SUMO (s) "
             "| SUMO collisions muvsim / SUMO | geometric, invariant (muvsim) | undrivable (muvsim) "
             "| signals (muvsim), red crossings | rtf muvsim / SUMO | error |")
-    lines = [head, "| " + " | ".join(["---"] * 11) + " |"]
+    lines = [head, "| " + " | ".join(["---"] * 12) + " |"]
     g = lambda r, k: r.get(k) if k in r else None  # noqa: E731 - a missing driver or column: "-"
     for name in dict.fromkeys(df["scenario"]):  # the CSV's order
         rows = df[df["scenario"] == name]
@@ -119,6 +127,7 @@ def scenarios_table(csv: Path = RESULTS / "scenarios.csv") -> str:
             lines.append(
                 f"| {label} | {_count(g(m, 'duration_s') if g(m, 'duration_s') is not None else g(b, 'duration_s'))} "
                 f"| {_count(g(m, 'demand'))} | {_pair(g(m, 'arrived'), g(b, 'arrived'), _count)} "
+                f"| {_of(g(m, 'gridlocked_at_end'), g(m, 'stopped_at_end'))} "
                 f"| {_pair(g(m, 'mean_delay_s'), g(b, 'mean_delay_s'), lambda v: _f(v, 1))} "
                 f"| {_pair(g(m, 'collisions_sumo'), g(b, 'collisions_sumo'), _count)} "
                 f"| {_count(g(m, 'collisions_geometric'))}, {_count(g(m, 'invariant_violations'))} "

@@ -85,6 +85,9 @@ class RequestFilters:
         self._junction_fleet: JunctionFleet | None = None  # this step's fleet as the junction gate saw it
         self._claims_now: ReachClaims | None = None        # authority: this step's claims before the decision
         self.pedestrian_withheld = 0  # requests and admissions withheld for pedestrians
+        #: this step's withheld requests: vehicle id -> the rule's name (``planned stop``, ``signal``,
+        #: ``junction token``, ``pedestrians``; :mod:`analysis.waits`)
+        self.withheld_by: dict[str, str] = {}
         #: the step being filtered, and the time its junction tokens took (ms)
         self.t = 0
         self.ms_gate = 0.0
@@ -101,19 +104,26 @@ class RequestFilters:
         self._link_state = None
         self._junction_fleet = None
         self._claims_now = claims_now
+        self.withheld_by = {}
         if state is not None and len(self.stops):
-            state = self._stops(state)
+            state = self._noted("planned stop", state, self._stops(state))
         if state is not None and len(self.signal_book):
-            state = self._signals(state)
+            state = self._noted("signal", state, self._signals(state))
         elif self.junctions.standing:
             self.junctions.give_back(())
         if state is not None and self.junctions.zones:
             tg = time.perf_counter()
-            state = self._gate(state)
+            state = self._noted("junction token", state, self._gate(state))
             self.ms_gate += (time.perf_counter() - tg) * 1e3
         if state is not None and self.pedestrians is not None and state.requesting.any():
-            state = self._walkers(state)
+            state = self._noted("pedestrians", state, self._walkers(state))
         return state
+
+    def _noted(self, rule: str, before: FleetState, after: FleetState) -> FleetState:
+        """``after``, the requests it withheld from ``before`` noted in :attr:`withheld_by` as ``rule``'s."""
+        for i in np.flatnonzero(before.requesting & ~after.requesting).tolist():
+            self.withheld_by.setdefault(before.ids[i], rule)
+        return after
 
     # -------------------------------------------------------------- planned stops
     def _k_speed(self) -> tuple[np.ndarray, np.ndarray]:

@@ -52,13 +52,15 @@ def test_the_scenario_table_is_scenarios_csv_and_the_check_catches_a_hand_edit(t
     df.loc[mu, "arrived"], df.loc[su, "arrived"] = 71, 83
     df.loc[mu, "mean_delay_s"], df.loc[su, "mean_delay_s"] = 123.456, 7.04
     df.loc[mu, "red_violations"], df.loc[mu, "signals"] = 5, "ignore"
+    df.loc[mu, "stopped_at_end"], df.loc[mu, "gridlocked_at_end"] = 12, 9
     df.loc[su, "error"] = "SumoError: boom"
     csv = tmp_path / "scenarios.csv"
     df.to_csv(csv, index=False)
     row = next(line for line in m.scenarios_table(csv).splitlines() if line.startswith(f"| {first} |"))
     cells = [c.strip() for c in row.strip("|").split("|")]
-    assert cells[3] == "71 / 83" and cells[4] == "123.5 / 7.0"  # delays to 0.1 s
-    assert cells[8] == "ignore, 5" and cells[10] == "sumo: SumoError: boom"
+    assert cells[4] == "9 of 12"  # muvsim's gridlocked of its vehicles at rest at the end
+    assert cells[3] == "71 / 83" and cells[5] == "123.5 / 7.0"  # delays to 0.1 s
+    assert cells[9] == "ignore, 5" and cells[11] == "sumo: SumoError: boom"
     # the README's own scenario table is the rendered one: a hand-edited figure is caught, re-rendering fixes it
     readme = tmp_path / "README.md"
     text = (ROOT / "README.md").read_text(encoding="utf-8")
@@ -98,7 +100,7 @@ def test_a_scenario_with_only_one_driver_renders_dashes_not_a_crash(tmp_path):
     pd.DataFrame([{"scenario": "cross", "driver": "muvsim", "duration_s": 20.0, "demand": 9, "arrived": 2,
                    "mean_delay_s": float("nan"), "collisions_sumo": 0, "rtf": 1.5, "error": ""}]).to_csv(csv, index=False)
     row = m.scenarios_table(csv).splitlines()[2]
-    assert row.startswith("| cross | 20 | 9 | 2 / - | - / - | 0 / - |") and row.endswith("| 1.50 / - | - |")
+    assert row.startswith("| cross | 20 | 9 | 2 / - | - | - / - | 0 / - |") and row.endswith("| 1.50 / - | - |")
 
 
 def test_authority_rows_render_after_the_paper_row_beside_the_same_sumo_figures(tmp_path):
@@ -114,4 +116,4 @@ def test_authority_rows_render_after_the_paper_row_beside_the_same_sumo_figures(
     cells = [[c.strip() for c in r.strip("|").split("|")] for r in rows]
     assert [c[0] for c in cells] == ["tlsgrid", "tlsgrid (authority)"]
     assert cells[0][3] == "5 / 45" and cells[1][3] == "7 / 45"
-    assert cells[0][9] == "1.00 / 300.00" and cells[1][9] == "0.50 / 300.00"
+    assert cells[0][10] == "1.00 / 300.00" and cells[1][10] == "0.50 / 300.00"

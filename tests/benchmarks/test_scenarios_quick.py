@@ -32,6 +32,8 @@ def test_scenarios_benchmark_quick_mode_writes_its_table(tmp_path):
     import json
     s = json.loads((tmp_path / "r" / "square-muvsim-authority" / "summary.json").read_text())
     assert m.loc["square", "demand"] == s["vehicles_total"] and m.loc["square", "rtf"] == s["rtf"]
+    assert (m.loc["square", "stopped_at_end"], m.loc["square", "gridlocked_at_end"]) == (
+        s["stopped_at_end"], s["gridlocked_at_end"])
     assert s["options"]["controller"] == "authority"
 
 
