@@ -115,6 +115,7 @@ import numpy as np
 
 from tm.authority_reach import AuthorityReach
 from tm.boxes import boxes_meet, corridor_hits, polygon_sets_meet, polygons_meet, ranges
+from tm.gate_boxes import GateBoxes
 from tm.gate_paths import GatePaths
 from tm.guard_spans import GuardSpans
 from tm.junctions import JunctionFleet, JunctionGate
@@ -178,14 +179,9 @@ class AuthorityGate(JunctionGate):
         self.spans = GuardSpans(self.guards, self.classes, self.passes)
         #: their wide paths through the zones and standing boxes (cached)
         self.paths = GatePaths(self.classes, self.spans)
-        #: route key -> the corridor's oriented boxes (:meth:`route_through`, :meth:`corridors_meet`)
-        self._corridor_boxes: dict = {}
-        self._meet_oriented: dict = {}  # (key, key) -> whether the oriented boxes meet
-        #: route key -> the exit slot's padded hold box as oriented boxes (:meth:`route_through`, :meth:`_slot_taken`)
-        self._slot_polys: dict = {}
-        #: over the run: exit slots whose world box met another vehicle's claims but whose oriented box did
-        #: not (:meth:`_slot_taken`)
-        self.slots_freed = 0
+        #: the oriented boxes of the routes' corridors and exit slots (:meth:`route_through`,
+        #: :meth:`corridors_meet`, :meth:`_slot_taken`, :meth:`_intruder_hits`)
+        self.boxes = GateBoxes(self.classes)
         #: over the run: requests withheld because their stop point would stand in a holder's path
         #: (:meth:`_keep_out`)
         self.wide_withheld = 0
@@ -195,7 +191,6 @@ class AuthorityGate(JunctionGate):
         self._still = StallClock()
         #: over the run: candidates' corridors let past a stalled holder's standing box (:meth:`_passable`)
         self.stalled_passed = 0
-        self._ahead_poly: dict = {}  # route key -> its corridor ahead as oriented boxes (:meth:`_ahead_polygons`)
         #: over the run: token hand-outs deferred because the candidate's wide path meets a vehicle standing
         #: at a red in the guard (:meth:`_standing_hits`)
         self.red_yielded = 0
@@ -216,6 +211,12 @@ class AuthorityGate(JunctionGate):
         self.ordered_granted = 0
         self._chained: set[int] = set()  # rows that want several zones' tokens this round (:meth:`_hand_out`)
         self._offered: set[tuple[int, str]] = set()  # (zone, vehicle) taking a token after holders this round
+
+    @property
+    def slots_freed(self) -> int:
+        """Over the run: exit slots whose world box met another vehicle's claims but whose oriented box
+        did not (:meth:`_slot_taken`)."""
+        return self.boxes.slots_freed
 
     @staticmethod
     def guard_radius(classes) -> float:
@@ -356,10 +357,7 @@ class AuthorityGate(JunctionGate):
             hs, h, (key, lo, hi), _ = todo[t]
             i0 = int(first[t])
             cut = (*key[:3], key[3] + i0 if len(key) > 3 else i0)
-            polys = self._corridor_boxes.get(key)
-            if polys is not None:
-                m = len(lo)
-                self._corridor_boxes[cut] = np.concatenate([polys[i0:m], polys[m + i0:]])
+            self.boxes.cut(key, cut, i0, len(lo))
             hs[h] = (cut, lo[i0:], hi[i0:])
             self.corridors_cut += 1
 
@@ -519,7 +517,8 @@ class AuthorityGate(JunctionGate):
         # ... then whether some oriented box of a candidate's corridor ahead meets some of each such
         # claim's, every pair in one compiled pass (each claim's boxes computed once)
         uq, q_of = np.unique(pq, return_inverse=True)
-        mine = [self._ahead_polygons(fleet, int(rq[qs[q]]), keys[qs[q]]) for q in uq.tolist()]
+        mine = [self.boxes.ahead(fleet, int(rq[qs[q]]), keys[qs[q]], len(self._routes[keys[qs[q]]][2]))
+                for q in uq.tolist()]
         p_cnt = np.array([len(m) for m in mine], dtype=np.intp)
         uj, j_of = np.unique(pj, return_inverse=True)
         Q, q_owner = fleet.claim_polygons(uj)
@@ -529,21 +528,6 @@ class AuthorityGate(JunctionGate):
         hits[qs[pq[meet]]] = True
         return hits
 
-    def _ahead_polygons(self, fleet: JunctionFleet, row: int, key) -> np.ndarray:
-        """Row ``row``'s corridor (route key ``key``, :meth:`route_through`) without the box at its
-        current waypoint, as oriented boxes padded by SUMO's body reach (cached per key)."""
-        found = self._ahead_poly.get(key)
-        if found is None:
-            W, H, k = fleet.route(row)
-            n = len(self._routes[key][2])
-            idx = np.arange(k + (n > 1), k + n)
-            nxt = np.minimum(idx + 1, len(H) - 1)
-            if len(self._ahead_poly) > 100_000:  # stale keys: start over
-                self._ahead_poly.clear()
-            found = self._ahead_poly[key] = self.classes[fleet.family[row]].corridor_polygons(
-                W[idx], fleet.pad(row, idx), H[idx], H[nxt])
-        return found
-
     def _slot_taken(self, fleet: JunctionFleet, keys: list, rows: np.ndarray) -> np.ndarray:
         """:meth:`JunctionGate._slot_taken` with oriented boxes: an exit slot whose world box meets
         the world box of another vehicle's claims is taken only when the slot's padded hold box and
@@ -551,23 +535,7 @@ class AuthorityGate(JunctionGate):
         road not along an axis the world boxes of opposite lanes overlap: on SUMO's ``fkk_in`` a car
         turning right onto the diagonal ``-148050455#0`` never found its exit slot free while a queue
         stood on ``148050455#0`` beside it, and with it waited every vehicle behind."""
-        out = np.ones(len(rows), dtype=bool)
-        if fleet.claim_polygons is None or not len(rows):
-            return out
-        mine = [self._slot_polys.get(key) for key in keys]
-        known = np.array([m is not None for m in mine])
-        if not known.any():
-            return out
-        pairs = np.flatnonzero(known)                    # all pairs at once
-        P = np.concatenate([mine[t] for t in pairs.tolist()])
-        p_count = np.array([len(mine[t]) for t in pairs.tolist()], dtype=np.intp)
-        uniq, inv = np.unique(rows[pairs], return_inverse=True)
-        Q, q_owner = fleet.claim_polygons(uniq)          # each other vehicle's boxes once
-        cnt = np.bincount(q_owner, minlength=len(uniq))
-        free = ~polygon_sets_meet(P, np.cumsum(p_count) - p_count, p_count, Q, (np.cumsum(cnt) - cnt)[inv], cnt[inv])
-        out[pairs[free]] = False
-        self.slots_freed += int(free.sum())
-        return out
+        return ~self.boxes.slot_free(fleet, keys, rows)
 
     def _standing_hits(self, fleet: JunctionFleet, zq: np.ndarray, rq: np.ndarray, first: np.ndarray,
                        c_lo: np.ndarray, c_hi: np.ndarray, zs: np.ndarray, rs: np.ndarray) -> np.ndarray:
@@ -643,16 +611,8 @@ class AuthorityGate(JunctionGate):
         if exits:
             h = cls.hold_half(H[last:last + 1], H[nxt[-1]:nxt[-1] + 1])[0]
             slot = (W[last] - h, W[last] + h)
-            if len(self._slot_polys) > 100_000:  # stale keys: start over (then taken as world boxes)
-                self._slot_polys.clear()
-            self._slot_polys[key] = cls.hold_polygons(W[last:last + 1], fleet.pad(row, idx[-1:]), H[last:last + 1],
-                                                      H[nxt[-1]:nxt[-1] + 1])
         self._routes[key] = found = (key, slot, corr_lo, corr_hi)
-        turn = np.angle(np.exp(1j * (np.r_[H[idx], H[nxt]] - H[idx[0]])))
-        if len(self._corridor_boxes) > 100_000:  # stale keys: start over (holders' then count as world boxes)
-            self._corridor_boxes.clear()
-        self._corridor_boxes[key] = (cls.corridor_polygons(W[idx], fleet.pad(row, idx), H[idx], H[nxt])
-                                     if np.ptp(turn) <= np.deg2rad(self.oriented_turn_max_deg) else None)
+        self.boxes.note_route(key, cls, W, H, idx, nxt, fleet.pad(row, idx), exits, self.oriented_turn_max_deg)
         return found
 
     def corridors_meet(self, key_a, lo_a, hi_a, key_b, lo_b, hi_b) -> bool:
@@ -665,16 +625,6 @@ class AuthorityGate(JunctionGate):
         the oriented boxes, README).  Only through movements (:attr:`oriented_turn_max_deg`); a turning
         corridor, or one whose boxes are not kept (dropped with the route cache), is taken as its
         world boxes."""
-        if not super().corridors_meet(key_a, lo_a, hi_a, key_b, lo_b, hi_b):
-            return False
-        pa, pb = self._corridor_boxes.get(key_a), self._corridor_boxes.get(key_b)
-        if pa is None or pb is None:
-            return True
-        pair = (key_a, key_b)
-        hit = self._meet_oriented.get(pair)
-        if hit is None:
-            if len(self._meet_oriented) > 200_000:  # stale keys: start over
-                self._meet_oriented.clear()
-            hit = self._meet_oriented[pair] = polygons_meet(pa, pb)
-        return hit
+        return (super().corridors_meet(key_a, lo_a, hi_a, key_b, lo_b, hi_b)
+                and self.boxes.corridors_meet(key_a, key_b))
 

@@ -487,7 +487,7 @@ def test_trim_cuts_each_holder_at_its_first_box_its_claim_meets(seed):
         lo = rng.uniform(0.0, 10.0, (m, 2))
         hi = lo + rng.uniform(0.5, 3.0, (m, 2))
         key = (v, i % 2, 3) if i % 3 else (v, i % 2, 3, 2)
-        gate._corridor_boxes[key] = polys = rng.normal(size=(2 * m, 4, 2))
+        gate.boxes.corridor[key] = polys = rng.normal(size=(2 * m, 4, 2))
         gate.holders[i % 2][v] = (key, lo, hi)
         meets = np.flatnonzero(np.all((lo <= c_hi[i]) & (hi >= c_lo[i]), axis=1))
         i0 = int(meets[0]) if len(meets) and v in pos and m > 1 else 0
@@ -499,7 +499,7 @@ def test_trim_cuts_each_holder_at_its_first_box_its_claim_meets(seed):
         for v, (key, lo, hi) in hs.items():
             w = want[v]
             assert key == w[0] and np.array_equal(lo, w[1]) and np.array_equal(hi, w[2])
-            assert np.array_equal(gate._corridor_boxes[key], w[3])
+            assert np.array_equal(gate.boxes.corridor[key], w[3])
     assert gate.corridors_cut == n_cut
 
 
@@ -1215,7 +1215,7 @@ class _OneByOneIntruders(AuthorityGate):
             near = np.all((lo2[a:b, None] <= fleet.claim_hi[js]) & (hi2[a:b, None] >= fleet.claim_lo[js]),
                           axis=2).any(axis=0)
             js = js[near]
-            hits[q] = len(js) > 0 and polygons_meet(self._ahead_polygons(fleet, int(rq[q]), keys[q]),
+            hits[q] = len(js) > 0 and polygons_meet(self.boxes.ahead(fleet, int(rq[q]), keys[q], len(self._routes[keys[q]][2])),
                                                     fleet.claim_polygons(js)[0])
         return hits
 
