@@ -393,7 +393,9 @@ def format_summary(summary: dict) -> str:
         elif k == "rtf":
             text = fmt(v, k) + "  (simulated s per wall s)" if v is not None else "-"
         elif k == "gridlocked_at_end" and v is not None:
-            text = (f"{int(v)} of the {int(s.get('stopped_at_end', 0))} vehicles at rest wait on a circle of waits "
+            n = int(s.get("stopped_at_end", 0))
+            text = ("no vehicle at rest" if not n else
+                    f"{int(v)} of the {n} vehicles at rest wait on a circle of waits "
                     f"({int(s.get('wait_cycles', 0))} cycle(s); waits.csv says who waits for whom)")
         else:
             text = fmt(v, k)

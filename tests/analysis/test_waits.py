@@ -89,3 +89,13 @@ def test_no_gridlock_where_traffic_flows():
     sim.run(3000)
     assert all(r.arrived_s is not None for r in sim.records.values())
     assert (run_tables(sim)[0]["gridlocked_at_end"], run_tables(sim)[0]["stopped_at_end"]) == (0, 0)
+
+
+def test_the_closing_table_says_it():
+    from analysis.report import format_summary
+
+    line = lambda s: next(ln for ln in format_summary(s).splitlines() if ln.startswith("gridlocked_at_end"))  # noqa: E731
+    assert "47 of the 55 vehicles at rest wait on a circle of waits (1 cycle(s)" in line(
+        dict(gridlocked_at_end=47, stopped_at_end=55, wait_cycles=1))
+    assert line(dict(gridlocked_at_end=0, stopped_at_end=0, wait_cycles=0)).endswith("no vehicle at rest")
+    assert "gridlocked_at_end" not in format_summary(dict(vehicles_arrived=3))  # SUMO's drivers: no such figure
