@@ -5,7 +5,8 @@ gridlock: vehicles each waiting for another that waits, around a circle, for the
 traffic manager's conflict edges tell which: a requester it denies waits for the vehicles whose
 claims its new claim meets (:attr:`tm.manager.Decision.edges`), and a request withheld before the
 decision waits for a rule (a planned stop's dwell, a red, a junction token, a pedestrian:
-:class:`bridge.request_filters.RequestFilters`).  :func:`wait_table` follows each vehicle's chain of
+:class:`bridge.request_filters.RequestFilters`) -- for a junction token, on the vehicles holding it
+(:attr:`tm.junctions.JunctionGate.waiting_on`).  :func:`wait_table` follows each vehicle's chain of
 waits, the other's current claim first (``new-old``, ``new-fixed``: the one standing in its way),
 until it reaches a vehicle that is not waiting for a vehicle (the chain's end is that one's
 reason, or ``moving``) or one it has met before (``cycle``: a gridlock, for good unless a rule
@@ -32,7 +33,8 @@ _FIRST = ("new-old", "new-fixed")
 
 
 def wait_table(ids: Sequence[str], xy: np.ndarray, speed: np.ndarray, requesting: np.ndarray, go: np.ndarray,
-               withheld_by: Mapping[str, str], edges: np.ndarray, edge_kinds: Sequence[str]) -> pd.DataFrame:
+               withheld_by: Mapping[str, str], edges: np.ndarray, edge_kinds: Sequence[str],
+               rule_blockers: Mapping[str, Sequence[str]] | None = None) -> pd.DataFrame:
     """Every vehicle at rest, why it waits, and where its chain of waits ends (module notes).
 
     Parameters
@@ -50,13 +52,17 @@ def wait_table(ids: Sequence[str], xy: np.ndarray, speed: np.ndarray, requesting
     edges : ndarray of int, shape (E, 2)
         The decision's conflicts ``(u, v)``: ``u``'s new claim meets ``v``'s claim.
     edge_kinds : sequence of str, shape (E,)
+    rule_blockers : mapping of str to sequence of str, optional
+        Vehicle id -> the vehicles a rule that withheld its request makes it wait for (a junction
+        token's holders); without: a withheld request's chain ends at its rule.
 
     Returns
     -------
     DataFrame
         :data:`WAIT_COLUMNS`, one row per vehicle at rest, in decision order: ``reason`` (``no
         request``, a rule's name, ``traffic manager`` or ``granted``), ``blockers`` (ids its new
-        claim meets, ``;``-joined, the other's current claims first), ``chain_end`` (``cycle``,
+        claim meets, ``;``-joined, the other's current claims first; for a rule, the vehicles it
+        waits for there), ``chain_end`` (``cycle``,
         ``moving`` or the reason of the last vehicle of the chain) and ``cycle`` (the ids of the
         cycle it ends in, ``;``-joined, in chain order).
     """
@@ -76,9 +82,12 @@ def wait_table(ids: Sequence[str], xy: np.ndarray, speed: np.ndarray, requesting
     for (u, v), k in zip(edges.tolist(), kinds):
         (first if k in _FIRST else later).setdefault(u, []).append(v)
     reason, blockers = {}, {}
+    row_of = {v: i for i, v in enumerate(ids)}
+    rule_blockers = rule_blockers or {}
     for i in np.flatnonzero(rest).tolist():
         if ids[i] in withheld_by:
             reason[i] = withheld_by[ids[i]]
+            blockers[i] = list(dict.fromkeys(row_of[v] for v in rule_blockers.get(ids[i], ()) if v in row_of))
         elif not requesting[i]:
             reason[i] = "no request"
         elif go[i]:
@@ -105,10 +114,8 @@ def _chain(i: int, reason: dict, blockers: dict) -> tuple[str, list[int]]:
         seen.append(cur)
         if cur not in reason:
             return "moving", []
-        if reason[cur] != TM_REASON:
-            return reason[cur], []
         if not blockers.get(cur):
-            return TM_REASON, []
+            return reason[cur], []
         cur = blockers[cur][0]
 
 
@@ -133,5 +140,7 @@ def waits_at_end(sim) -> pd.DataFrame:
             where.update(zip(g.ids, S[:, :4].tolist()))
     rows = np.array([where.get(v, [np.nan] * 4) for v in dec.ids], dtype=float).reshape(len(dec.ids), 4)
     filters = getattr(sim, "filters", None)
+    gate = getattr(filters, "junctions", None)
     return wait_table(dec.ids, rows[:, :2], np.hypot(rows[:, 2], rows[:, 3]), dec.requesting, dec.go,
-                      getattr(filters, "withheld_by", {}), dec.edges, dec.edge_kinds)
+                      getattr(filters, "withheld_by", {}), dec.edges, dec.edge_kinds,
+                      getattr(gate, "waiting_on", {}))

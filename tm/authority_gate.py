@@ -451,6 +451,8 @@ class AuthorityGate(JunctionGate):
         for (_, v), hs in self.after.items():
             after.setdefault(v, set()).update(hs)
         out, n = self.keep_out.apply(fleet, req, self.holders, self.paths.wide_paths, self.paths.on_routes, after)
+        for v, hs in self.keep_out.kept_from.items():
+            self.waiting_on.setdefault(v, []).extend(hs)
         self.requests_withheld += n
         self.wide_withheld += n
         return out

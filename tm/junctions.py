@@ -267,6 +267,10 @@ class JunctionGate:
         self.tokens_granted = 0
         self.tokens_given_back = 0
         self.requests_withheld = 0
+        #: this step's withheld requesters -> the holders of the tokens they wait for (none: something
+        #: else held the hand-out back, e.g. a claim in the corridor or no room at the exit slot;
+        #: :mod:`analysis.waits`)
+        self.waiting_on: dict[str, list[str]] = {}
 
     @staticmethod
     def guard_radius(classes) -> float:
@@ -338,12 +342,16 @@ class JunctionGate:
         self._release(fleet, pos)
         req = np.array(requesting, dtype=bool)
         r = np.flatnonzero(req)
+        self.waiting_on = {}
         if not len(r):
             return req
         wz, wrow = self._wanting(fleet, r, new_lo, new_hi)
         allowed = self._hand_out(t, fleet, pos, wz, wrow)
         req[wrow[~allowed]] = False   # only a zone's holders may ask into its guard
         self.requests_withheld += len(np.unique(wrow[~allowed]))
+        for z, row in zip(wz[~allowed].tolist(), wrow[~allowed].tolist()):
+            vid = fleet.ids[row]
+            self.waiting_on.setdefault(vid, []).extend(h for h in self.holders[z] if h != vid)
         wait = self.wait
         for key in [k for k in wait if k[1] not in pos or k[1] in self.holders[k[0]]]:
             wait.pop(key, None)

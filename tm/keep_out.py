@@ -44,6 +44,8 @@ class KeepOut:
         self.classes = classes
         #: over the run: holders let go into each other's paths (:meth:`_mutual`)
         self.mutual_released = 0
+        #: the last call's withheld vehicles -> the holders whose paths they were kept out of (ids)
+        self.kept_from: dict[str, list[str]] = {}
         self.margin = max((c.delta + c.hold + 0.5 * np.hypot(c.length, c.width) for c in classes.values()),
                           default=0.0) + 10.0
 
@@ -90,6 +92,7 @@ class KeepOut:
         ids = fleet.ids
         pos = dict(zip(ids, range(len(ids))))
         after = after or {}
+        self.kept_from = {}
         r = np.flatnonzero(req)
         if not len(r):
             return req, 0
@@ -156,6 +159,7 @@ class KeepOut:
             return out, 0
         out[list(by)] = False
         n_withheld = len(by) - self._mutual(ids, by, out)
+        self.kept_from = {ids[j]: [ids[h] for h in sorted(hs)] for j, hs in by.items() if not out[j]}
         return out, n_withheld
 
     @staticmethod

@@ -43,6 +43,23 @@ def test_reasons_and_chain_ends():
     assert wait_figures(w) == dict(stopped_at_end=10, gridlocked_at_end=3, wait_cycles=1)
 
 
+def test_a_token_waiter_waits_for_the_holders():
+    """v0 waits for a junction token held by v1, which waits (traffic manager) for v0: a cycle through
+    the token; v2 waits for the token held by v3, which moves; v4 for a token with no holder named."""
+    w = _table(5, rest=[0, 1, 2, 4], requesting=[1], go=[], edges=[(1, 0)], kinds=["new-old"],
+               withheld={"v0": "junction token", "v2": "junction token", "v4": "junction token"})
+    assert w.set_index("vehicle")["chain_end"].to_dict() == {"v0": "junction token", "v1": "junction token",
+                                                             "v2": "junction token", "v4": "junction token"}
+    speed = np.array([0.0, 0.0, 0.0, 5.0, 0.0])
+    w = wait_table([f"v{i}" for i in range(5)], np.zeros((5, 2)), speed, np.isin(np.arange(5), [1]),
+                   np.zeros(5, dtype=bool), {"v0": "junction token", "v2": "junction token", "v4": "junction token"},
+                   np.array([[1, 0]]), ["new-old"], {"v0": ["v1"], "v2": ["v3", "gone"]}).set_index("vehicle")
+    assert (w.loc["v0", "blockers"], w.loc["v0", "chain_end"], w.loc["v0", "cycle"]) == ("v1", "cycle", "v0;v1")
+    assert (w.loc["v2", "blockers"], w.loc["v2", "chain_end"]) == ("v3", "moving")  # "gone": not in the run
+    assert (w.loc["v4", "blockers"], w.loc["v4", "chain_end"]) == ("", "junction token")
+    assert wait_figures(w.reset_index()) == dict(stopped_at_end=4, gridlocked_at_end=2, wait_cycles=1)
+
+
 def test_bad_edges_and_empty():
     with pytest.raises(ValueError, match="2 edges and 1 kinds"):
         _table(3, [0], [0], [], {}, [(0, 1), (0, 2)], ["new-old"])

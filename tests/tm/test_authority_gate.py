@@ -643,6 +643,7 @@ def test_a_follower_stays_out_of_the_claims_its_turning_leader_has_still_to_make
     for f_holds in (False, True):  # in grid's lock car 124 held D0's token too, following bus 111
         gate, asked, W, corner = _turn_scene(k_ask, 7.0, f_holds)
         assert not asked["F"] and gate.wide_withheld == 1, f_holds
+        assert gate.waiting_on == {"F": ["T"]}  # kept out of T's path: it waits for T (analysis.waits)
     gate, asked, _, _ = _turn_scene(k_ask, 0.0)
     assert asked["F"] and gate.wide_withheld == 0
     gate, asked, _, _ = _turn_scene(k_ask - 1, 7.0)

@@ -115,6 +115,16 @@ def test_no_overtaking_of_a_blocked_waiter():
     assert gate.wait == {(0, "B"): 0, (0, "C"): 0}
 
 
+def test_a_withheld_waiter_names_the_holders_it_waits_for():
+    """For analysis.waits: B (north) and C (west) wait for A's token round; B's corridor crosses A's,
+    C is not let past B: both name A, the zone's holder.  A step without requests names nobody."""
+    gate = _gate()
+    assert Scene({"A": EAST, "B": NORTH, "C": WEST}).withhold(gate) == {"A"}
+    assert gate.waiting_on == {"B": ["A"], "C": ["A"]}
+    Scene({"A": EAST, "B": NORTH}, idle=("A", "B")).withhold(gate, t=1)
+    assert gate.waiting_on == {}
+
+
 def test_a_waiter_stuck_behind_a_claim_in_the_guard_holds_nobody_back():
     """B (north) crosses the holder A's corridor, but E stands in B's own path inside the guard
     (no token: a queue at a red light on SUMO's ``tools/game/cross``, where the first waiter of

@@ -104,6 +104,8 @@ def test_two_holders_kept_out_of_each_others_path_one_goes(third):
                       lambda f, rows, js, ahead=0: np.zeros(len(js), dtype=bool))
     assert out.tolist() == ([False, False, False] if third else [True, False, False])
     assert n == (2 if third else 1) and ko.mutual_released == (0 if third else 1)
+    # who each withheld one was kept out for (analysis.waits): B for A; with C, A for B and C
+    assert ko.kept_from == ({"A": ["B", "C"], "B": ["A"]} if third else {"B": ["A"]})
 
 
 def _reference(ko, fleet, req, holders, paths, on_route):
