@@ -96,27 +96,43 @@ def wait_table(ids: Sequence[str], xy: np.ndarray, speed: np.ndarray, requesting
             reason[i] = TM_REASON
             blockers[i] = list(dict.fromkeys(first.get(i, []) + later.get(i, [])))
     rows = []
+    ends = _chain_ends(reason, blockers)
     for i in sorted(reason):
-        end, cycle = _chain(i, reason, blockers)
+        end, cycle = ends[i]
         rows.append((ids[i], round(float(xy[i, 0]), 2), round(float(xy[i, 1]), 2), round(float(speed[i]), 3),
                      reason[i], ";".join(ids[b] for b in blockers.get(i, [])), end,
                      ";".join(ids[c] for c in cycle)))
     return pd.DataFrame(rows, columns=list(WAIT_COLUMNS))
 
 
-def _chain(i: int, reason: dict, blockers: dict) -> tuple[str, list[int]]:
-    """Where the chain of waits from ``i`` ends: ``(end, cycle members)``."""
-    seen: list[int] = []
-    cur = i
-    while True:
-        if cur in seen:
-            return "cycle", seen[seen.index(cur):]
-        seen.append(cur)
-        if cur not in reason:
-            return "moving", []
-        if not blockers.get(cur):
-            return reason[cur], []
-        cur = blockers[cur][0]
+def _chain_ends(reason: dict, blockers: dict) -> dict:
+    """Where the chain of waits from each vehicle of ``reason`` ends: ``{i: (end, cycle members)}``, the
+    members of a cycle from where the chain enters it.  Each vehicle's answer is its first blocker's
+    (or its own end), so every vehicle is walked once: linear in the vehicles at rest."""
+    out: dict = {}
+    for start in reason:
+        path: list[int] = []
+        at: dict[int, int] = {}
+        cur = start
+        while cur not in out:
+            if cur in at:  # a new cycle: each member's chain runs around it from itself
+                cyc = path[at[cur]:]
+                for j, m in enumerate(cyc):
+                    out[m] = ("cycle", cyc[j:] + cyc[:j])
+                del path[at[cur]:]
+                break
+            if cur not in reason:
+                out[cur] = ("moving", [])
+                break
+            if not blockers.get(cur):
+                out[cur] = (reason[cur], [])
+                break
+            at[cur] = len(path)
+            path.append(cur)
+            cur = blockers[cur][0]
+        for m in reversed(path):  # the tail leading here: each ends where its first blocker does
+            out[m] = out[blockers[m][0]]
+    return out
 
 
 def wait_figures(waits: pd.DataFrame) -> dict:
