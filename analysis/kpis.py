@@ -284,7 +284,7 @@ def timing_means(steps: pd.DataFrame) -> dict:
             for c in ("tm_ms", "controller_ms", "world_ms", "logging_ms")}
 
 
-def run_tables(sim, tripinfo=None) -> tuple[dict, pd.DataFrame, pd.DataFrame]:
+def run_tables(sim, tripinfo=None, waits=None) -> tuple[dict, pd.DataFrame, pd.DataFrame]:
     """Summary figures, per-step table and per-vehicle table of a (possibly partial) :class:`Cosim` run.
 
     Parameters
@@ -292,6 +292,8 @@ def run_tables(sim, tripinfo=None) -> tuple[dict, pd.DataFrame, pd.DataFrame]:
     sim : bridge.cosim.Cosim
     tripinfo : path-like, optional
         SUMO's tripinfo of the run, if it exists (read for ``sumo_time_loss_s``).
+    waits : DataFrame, optional
+        :func:`analysis.waits.waits_at_end` of ``sim``, if the caller has it already (else made here).
 
     Returns
     -------
@@ -340,7 +342,7 @@ def run_tables(sim, tripinfo=None) -> tuple[dict, pd.DataFrame, pd.DataFrame]:
     from analysis.waits import wait_figures, waits_at_end
 
     figures.update(verdict(figures))
-    figures.update(wait_figures(waits_at_end(sim)))
+    figures.update(wait_figures(waits_at_end(sim) if waits is None else waits))
     gate = getattr(sim, "junctions", None)  # the junction liveness layer (tm.junctions, tm.authority_gate)
     if gate is not None:
         figures.update(zones=len(gate.zones), zones_ignored=int(getattr(sim, "zones_ignored", 0)),

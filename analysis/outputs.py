@@ -65,11 +65,12 @@ def write_run_tables(out, sim, tripinfo=None) -> dict:
         :func:`analysis.kpis.run_tables`'s figures.
     """
     out = Path(out)
-    figures, steps, vehicles = run_tables(sim, tripinfo)
+    waits = waits_at_end(sim)  # once: for the figures and the file
+    figures, steps, vehicles = run_tables(sim, tripinfo, waits)
     _replace_csv(steps, out / "steps.csv")
     _replace_csv(per_second(steps), out / "steps_1s.csv")
     _replace_csv(vehicles, out / "vehicles.csv")
-    _replace_csv(waits_at_end(sim), out / "waits.csv")
+    _replace_csv(waits, out / "waits.csv")
     return figures
 
 

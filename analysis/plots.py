@@ -23,6 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
+from analysis.halts import SUMO_HALT_MPS
+
 __all__ = ["write_plots", "PLOT_KINDS", "STATE_COLOURS", "vehicle_states_with_state", "busiest_routes",
            "read_denials"]
 
@@ -31,8 +33,8 @@ PLOT_KINDS = ("timespace", "trajectories", "membership", "delay", "stops")
 #: Colour of each state of a vehicle in a step.
 STATE_COLOURS = {"moving": "#2b7bba", "halted": "#f0a30a", "TM-stopped": "#d7301f"}
 
-#: A vehicle at most this fast (m/s) is halted (SUMO's waiting definition, as analysis.halts).
-HALT_SPEED_MPS = 0.1
+#: A vehicle at most this fast (m/s) is halted (SUMO's waiting definition, :mod:`analysis.halts`).
+HALT_SPEED_MPS = SUMO_HALT_MPS
 
 #: Time-space and trajectory plots draw every this many steps (0.5 s at Ts = 0.1 s).
 PLOT_EVERY = 5

@@ -21,12 +21,12 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 import pandas as pd
 
-__all__ = ["wait_table", "wait_figures", "waits_at_end", "WAIT_COLUMNS", "AT_REST_MPS"]
+from analysis.halts import SUMO_HALT_MPS
+
+__all__ = ["wait_table", "wait_figures", "waits_at_end", "WAIT_COLUMNS"]
 
 #: Columns of :func:`wait_table` (``waits.csv``).
 WAIT_COLUMNS = ("vehicle", "x_m", "y_m", "speed_mps", "reason", "blockers", "chain_end", "cycle")
-#: A vehicle slower than this (m/s) is at rest here.
-AT_REST_MPS = 0.1
 #: The traffic manager's reason, and the order its conflict kinds are followed in.
 TM_REASON = "traffic manager"
 _FIRST = ("new-old", "new-fixed")
@@ -44,7 +44,8 @@ def wait_table(ids: Sequence[str], xy: np.ndarray, speed: np.ndarray, requesting
     xy : ndarray, shape (n, 2)
         Their positions (m); NaN for a vehicle no longer in the network (left out).
     speed : ndarray, shape (n,)
-        Their speeds (m/s); NaN for a vehicle no longer in the network.
+        Their speeds (m/s); NaN for a vehicle no longer in the network.  At rest: at most
+        :data:`analysis.halts.SUMO_HALT_MPS` (SUMO's halting speed, as the halt counts).
     requesting, go : ndarray of bool, shape (n,)
         The requests the traffic manager saw (after the rules' withholding) and its grants.
     withheld_by : mapping of str to str
@@ -76,7 +77,7 @@ def wait_table(ids: Sequence[str], xy: np.ndarray, speed: np.ndarray, requesting
     kinds = [str(k) for k in edge_kinds]
     if len(kinds) != len(edges):
         raise ValueError(f"wait_table: {len(edges)} edges and {len(kinds)} kinds")
-    rest = np.isfinite(speed) & (speed < AT_REST_MPS)
+    rest = np.isfinite(speed) & (speed <= SUMO_HALT_MPS)  # at rest: halted as SUMO counts it
     first: dict[int, list[int]] = {}
     later: dict[int, list[int]] = {}
     for (u, v), k in zip(edges.tolist(), kinds):
