@@ -15,6 +15,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from bridge.interrupt import interrupt_behind
+
 __all__ = ["ScenarioRunError", "run_scenario", "SCENARIOS", "default_controller", "default_vclass"]
 
 SCENARIOS = ("single", "paper10", "swap", "crossing")
@@ -98,6 +100,9 @@ def run_scenario(name: str, out: Path, opts, observers_extra: list | None = None
     except SynthesisError as exc:
         summary.update(complete=False, error=f"class {vclass.name!r} cannot be synthesised: {exc}")
     except Exception as exc:  # keep what was written, say why the run is incomplete
+        if interrupt_behind(exc):  # a Ctrl-C that came back wrapped (bridge.interrupt)
+            summary["interrupted"] = True
+            raise KeyboardInterrupt from exc
         summary.update(complete=False, error=f"{type(exc).__name__}: {exc}",
                        traceback=traceback.format_exc(limit=5))
     finally:
@@ -174,6 +179,9 @@ def run_multi(name: str, out: Path, opts, world=None, specs=None, observers_extr
     except (SynthesisError, ClassError, ValueError) as exc:
         summary["error"] = f"{type(exc).__name__}: {exc}"
     except Exception as exc:  # keep what was written, say why the run is incomplete
+        if interrupt_behind(exc):  # a Ctrl-C that came back wrapped (bridge.interrupt)
+            summary["interrupted"] = True
+            raise KeyboardInterrupt from exc
         summary.update(error=f"{type(exc).__name__}: {exc}", traceback=traceback.format_exc(limit=6))
     finally:
         summary["wall_s"] = round(time.perf_counter() - t0, 3)

@@ -24,6 +24,7 @@ from controllers.speed_limits import SpeedSettings
 from bridge.cosim import Cosim, CosimSettings, VehicleSpec, Zone
 from bridge.departure import DepartLanes, DepartPlan, depart_plan, first_edge_end
 from bridge.groups import _headings as spec_headings
+from bridge.interrupt import interrupt_behind
 from bridge.pose import front_bumper, sumo_angle
 from analysis.kpis import baseline_vehicle_table, read_tripinfo
 from analysis.halts import HaltCounter
@@ -741,6 +742,9 @@ def run_sumo(target: str, out: Path, opts, observers_extra: list | None = None) 
     except (ScenarioError, RouteError, SumoError, InputError) as exc:
         summary["error"] = f"{type(exc).__name__}: {exc}"
     except Exception as exc:
+        if interrupt_behind(exc):  # a Ctrl-C that came back wrapped (bridge.interrupt)
+            summary["interrupted"] = True
+            raise KeyboardInterrupt from exc
         summary.update(error=f"{type(exc).__name__}: {exc}", traceback=traceback.format_exc(limit=6))
     finally:
         try:
